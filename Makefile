@@ -1,0 +1,53 @@
+# physinfer — two commands on a fresh machine: `make demo` and `make test`.
+SHELL := /bin/bash
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+# torch first, from the machine's own wheel (CPU here); the constraint keeps every later
+# install from replacing it with a CUDA build.
+TORCH_SPEC ?= torch==2.13.0
+CONSTRAINTS := $(VENV)/constraints.txt
+EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+PIP := $(BIN)/pip --disable-pip-version-check
+# pip warns once per package about index folders this machine lacks; hide only that line.
+QUIET_PIP := 2> >(grep -v "is ignored: it is neither" >&2)
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: install system-deps demo test test-all lint bench pretrained clean
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+
+$(VENV)/.installed: pyproject.toml examples/pendulum/pyproject.toml | $(BIN)/python
+	$(MAKE) --no-print-directory system-deps
+	$(PIP) install -q "$(TORCH_SPEC)" $(QUIET_PIP)
+	$(BIN)/python -c "import torch; print('torch==' + torch.__version__)" > $(CONSTRAINTS)
+	$(PIP) install -q -c $(CONSTRAINTS) -e ".[dev]" $(QUIET_PIP)
+	$(PIP) install -q -c $(CONSTRAINTS) -e examples/pendulum $(QUIET_PIP)
+	$(BIN)/python -c "import physinfer, physinfer_flag, pendulum_example" 
+	touch $@
+
+install: $(VENV)/.installed
+
+# Headless OpenGL through EGL on Mesa's CPU driver (llvmpipe); installed only when missing.
+system-deps:
+	@if ! ldconfig -p | grep -q "libEGL_mesa.so" || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
+		echo "installing $(EGL_PACKAGES) (headless EGL)"; \
+		if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; \
+		else sudo apt-get update -qq && sudo apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; fi; \
+	fi
+
+demo: install
+	$(BIN)/physinfer refine --plugin pendulum --out runs/demo
+
+test: install
+	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+test-all: install
+	$(BIN)/python -m pytest -q -p no:cacheprovider -m ""
+
+lint: install
+	$(BIN)/ruff check core plugins tests examples benchmarks
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,16 @@
+"""physinfer's built-in plugin: the optimizers and the generic spectral embedder.
+
+Registered through the ``physinfer`` entry-point group like any third-party plugin.
+"""
+
+from __future__ import annotations
+
+from physinfer.hooks import hookimpl
+from physinfer.registry import Registry
+
+
+@hookimpl
+def physinfer_register_optimizers(registry: Registry) -> None:
+    registry.add_optimizer("ax", "physinfer.optimizers.ax:AxOptimizer", "Bayesian optimisation (Ax, GP with Matérn-5/2)")
+    registry.add_optimizer("random", "physinfer.optimizers.random:RandomOptimizer", "uniform random search")
+    registry.add_optimizer("cma", "physinfer.optimizers.cma:CMAOptimizer", "CMA-ES (pycma)")

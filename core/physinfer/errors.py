@@ -1,0 +1,19 @@
+"""Exceptions with messages meant for users.
+
+The CLI prints a :class:`UserInputError` as one clear line (what was wrong, how to fix
+it) and exits with status 2, never with a traceback. Anything else is a bug.
+"""
+
+from __future__ import annotations
+
+
+class PhysinferError(Exception):
+    """Base class of physinfer's own errors."""
+
+
+class UserInputError(PhysinferError, ValueError):
+    """Bad input from the user: a file, an option, a parameter value."""
+
+
+class SimulationFailed(PhysinferError, RuntimeError):
+    """A simulation raised, produced NaN or blew up; the refinement records a failed trial."""

@@ -1,0 +1,132 @@
+"""Plugin discovery: a pluggy manager fed from the ``physinfer`` entry-point group.
+
+Built-in and third-party plugins are found the same way. A plugin that fails to import
+or whose hook raises is recorded with its name and error; the others still load.
+``PHYSINFER_DISABLED_PLUGINS`` (comma-separated entry-point names) blocks plugins.
+"""
+
+from __future__ import annotations
+
+import os
+import traceback
+from dataclasses import dataclass, field
+from importlib import metadata
+from types import ModuleType
+from typing import Any
+
+import pluggy
+
+from physinfer import hooks
+from physinfer.registry import Registry
+
+ENTRY_POINT_GROUP = "physinfer"
+DISABLED_ENV = "PHYSINFER_DISABLED_PLUGINS"
+REGISTER_HOOKS = (
+    "physinfer_register_phenomena",
+    "physinfer_register_optimizers",
+    "physinfer_register_embedders",
+    "physinfer_register_effects",
+    "physinfer_register_commands",
+)
+
+
+@dataclass
+class PluginInfo:
+    """What is known about one plugin.
+
+    Attributes:
+        name: Entry-point name (what ``PHYSINFER_DISABLED_PLUGINS`` takes).
+        distribution: Distribution that declares it, if any.
+        version: That distribution's version.
+        module: Imported module name (``value`` of the entry point).
+        error: ``"ExcType: message"`` if it failed to load or register, else ``None``.
+        traceback: Full traceback text of that failure, for ``--verbose`` listings.
+    """
+
+    name: str
+    distribution: str | None = None
+    version: str | None = None
+    module: str = ""
+    error: str | None = None
+    traceback: str | None = field(default=None, repr=False)
+
+
+def disabled_plugins() -> set[str]:
+    """Names listed in ``PHYSINFER_DISABLED_PLUGINS``."""
+    return {n.strip() for n in os.environ.get(DISABLED_ENV, "").split(",") if n.strip()}
+
+
+def get_plugin_manager(
+    *, extra_plugins: dict[str, ModuleType | Any] | None = None, load_entry_points: bool = True
+) -> tuple[pluggy.PluginManager, dict[str, PluginInfo]]:
+    """Create a fresh plugin manager (no module-global state).
+
+    Args:
+        extra_plugins: Plugin objects to register directly by name (tests, notebooks).
+        load_entry_points: Whether to load the ``physinfer`` entry-point group.
+
+    Returns:
+        The manager and a :class:`PluginInfo` per plugin seen (loaded or failed).
+    """
+    pm = pluggy.PluginManager(hooks.PROJECT_NAME)
+    pm.add_hookspecs(hooks)
+    infos: dict[str, PluginInfo] = {}
+    blocked = disabled_plugins()
+    for name in blocked:
+        pm.set_blocked(name)
+    if load_entry_points:
+        for ep in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+            if ep.name in blocked or ep.name in infos:
+                continue
+            dist = getattr(ep, "dist", None)
+            info = PluginInfo(
+                name=ep.name,
+                distribution=dist.metadata["Name"] if dist is not None else None,
+                version=dist.version if dist is not None else None,
+                module=ep.value,
+            )
+            infos[ep.name] = info
+            try:
+                pm.register(ep.load(), name=ep.name)
+            except Exception as exc:  # a broken plugin must not take the others down
+                info.error = f"{type(exc).__name__}: {exc}"
+                info.traceback = traceback.format_exc()
+    for name, plugin in (extra_plugins or {}).items():
+        if name in blocked:
+            continue
+        infos[name] = PluginInfo(name=name, module=getattr(plugin, "__name__", repr(plugin)))
+        pm.register(plugin, name=name)
+    pm.check_pending()
+    return pm, infos
+
+
+def load_registry(
+    pm: pluggy.PluginManager | None = None,
+    infos: dict[str, PluginInfo] | None = None,
+    *,
+    extra_plugins: dict[str, Any] | None = None,
+    load_entry_points: bool = True,
+) -> tuple[Registry, dict[str, PluginInfo]]:
+    """Call every registration hook, plugin by plugin, into a new :class:`Registry`.
+
+    A plugin whose hook raises is marked with its error and what it registered before
+    failing is kept out of the way of nothing else.
+    """
+    if pm is None:
+        pm, infos = get_plugin_manager(extra_plugins=extra_plugins, load_entry_points=load_entry_points)
+    infos = infos if infos is not None else {}
+    registry = Registry()
+    for hook_name in REGISTER_HOOKS:
+        caller = getattr(pm.hook, hook_name)
+        for impl in caller.get_hookimpls():
+            plugin = impl.plugin_name
+            if infos.get(plugin) is not None and infos[plugin].error:
+                continue
+            try:
+                impl.function(registry=registry.scoped(plugin))
+            except Exception as exc:
+                info = infos.setdefault(plugin, PluginInfo(name=plugin))
+                info.error = f"{type(exc).__name__} in {hook_name}: {exc}"
+                info.traceback = traceback.format_exc()
+    registry.errors.update({name: info.error for name, info in infos.items() if info.error})
+    return registry, infos

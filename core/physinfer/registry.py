@@ -1,0 +1,145 @@
+"""The registry that plugins fill through hooks, with lazy ``"module:attr"`` references.
+
+Entries remember which plugin added them, so ``physinfer plugins`` can show who
+provides what, and resolve their implementation only when first used.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from physinfer.errors import UserInputError
+
+KINDS = ("phenomena", "optimizers", "embedders", "effects", "commands")
+
+
+def resolve(ref: str | Callable[..., Any]) -> Any:
+    """Import a ``"package.module:attr"`` reference (callables pass through)."""
+    if not isinstance(ref, str):
+        return ref
+    module_name, sep, attr = ref.partition(":")
+    if not sep:
+        raise ValueError(f"reference {ref!r} must look like 'package.module:attr'")
+    obj: Any = importlib.import_module(module_name)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+@dataclass
+class Entry:
+    """One registered thing.
+
+    Attributes:
+        name: Its name (unique within its kind).
+        factory: ``"module:attr"`` or callable producing the implementation.
+        description: One line for listings.
+        plugin: Name of the plugin that registered it.
+        extra: Kind-specific metadata (``phenomenon`` for effects).
+    """
+
+    name: str
+    factory: str | Callable[..., Any]
+    description: str = ""
+    plugin: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def load(self) -> Any:
+        """Resolve the factory reference."""
+        return resolve(self.factory)
+
+
+class Registry:
+    """All phenomena, optimizers, embedders, effects and commands of the loaded plugins."""
+
+    def __init__(self) -> None:
+        self.entries: dict[str, dict[str, Entry]] = {kind: {} for kind in KINDS}
+        self.errors: dict[str, str] = {}
+        self._plugin = ""
+
+    def scoped(self, plugin: str) -> Registry:
+        """A view whose ``add_*`` calls are attributed to ``plugin``."""
+        view = object.__new__(Registry)
+        view.entries, view.errors, view._plugin = self.entries, self.errors, plugin
+        return view
+
+    def _add(self, kind: str, name: str, factory: Any, description: str, **extra: Any) -> None:
+        existing = self.entries[kind].get(name)
+        if existing is not None:
+            raise ValueError(
+                f"{kind[:-1] if kind != 'phenomena' else 'phenomenon'} {name!r} registered twice "
+                f"(by {existing.plugin!r} and {self._plugin!r})"
+            )
+        self.entries[kind][name] = Entry(name, factory, description, self._plugin, dict(extra))
+
+    def add_phenomenon(self, name: str, factory: str | Callable[[], Any], description: str = "") -> None:
+        """Register a phenomenon; ``factory()`` returns a :class:`~physinfer.roles.Phenomenon`."""
+        self._add("phenomena", name, factory, description)
+
+    def add_optimizer(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+        """Register an optimizer; ``factory(dim=, seed=, names=)`` returns an Optimizer."""
+        self._add("optimizers", name, factory, description)
+
+    def add_embedder(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+        """Register an embedder; ``factory(model=None, device=None)`` returns an Embedder."""
+        self._add("embedders", name, factory, description)
+
+    def add_effect(
+        self, name: str, factory: str | Callable[[], Any], phenomenon: str, description: str = ""
+    ) -> None:
+        """Register an effect of ``phenomenon``; ``factory()`` returns an Effect."""
+        self._add("effects", name, factory, description, phenomenon=phenomenon)
+
+    def add_command(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+        """Register a CLI command (a ``typer.Typer`` group or a function)."""
+        self._add("commands", name, factory, description)
+
+    # -- lookup -----------------------------------------------------------------------
+
+    def get(self, kind: str, name: str) -> Entry:
+        """The entry ``name`` of ``kind``, or a :class:`UserInputError` listing what exists."""
+        try:
+            return self.entries[kind][name]
+        except KeyError:
+            known = ", ".join(sorted(self.entries[kind])) or "none"
+            hint = ""
+            if kind == "phenomena" and self.errors:
+                hint = " (plugins that failed to load: " + ", ".join(sorted(self.errors)) + ")"
+            label = {"phenomena": "plugin/phenomenon"}.get(kind, kind[:-1])
+            raise UserInputError(f"unknown {label} {name!r}; installed: {known}{hint}") from None
+
+    def phenomenon(self, name: str) -> Any:
+        """Build the :class:`~physinfer.roles.Phenomenon` called ``name``."""
+        return self.get("phenomena", name).load()()
+
+    def optimizer(self, name: str, **kwargs: Any) -> Any:
+        """Build the optimizer called ``name``."""
+        return self.get("optimizers", name).load()(**kwargs)
+
+    def embedder(self, name: str, **kwargs: Any) -> Any:
+        """Build the embedder called ``name``."""
+        return self.get("embedders", name).load()(**kwargs)
+
+    def effect(self, name: str, phenomenon: str | None = None) -> Any:
+        """Build the effect called ``name``, checking it belongs to ``phenomenon``."""
+        entry = self.get("effects", name)
+        if phenomenon is not None and entry.extra.get("phenomenon") != phenomenon:
+            known = ", ".join(self.effects_of(phenomenon)) or "none"
+            raise UserInputError(
+                f"effect {name!r} belongs to {entry.extra.get('phenomenon')!r}, not {phenomenon!r}; "
+                f"effects of {phenomenon!r}: {known}"
+            )
+        return entry.load()()
+
+    def effects_of(self, phenomenon: str) -> list[str]:
+        """Names of the effects registered for ``phenomenon``."""
+        return sorted(n for n, e in self.entries["effects"].items() if e.extra.get("phenomenon") == phenomenon)
+
+    def by_plugin(self, plugin: str) -> dict[str, list[str]]:
+        """What ``plugin`` registered, by kind."""
+        return {
+            kind: sorted(n for n, e in self.entries[kind].items() if e.plugin == plugin) for kind in KINDS
+        }

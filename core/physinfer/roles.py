@@ -1,0 +1,218 @@
+"""The abstract roles of the refinement loop and the :class:`Phenomenon` record.
+
+``θ → Simulator → Trajectory → Renderer(ζ) → Clip → Embedder → vector``; an
+:class:`Optimizer` proposes θ in ``[-1, 1]^D`` and is told the embedding distance.
+An :class:`Effect` is an optional physical term a phenomenon can switch into its
+simulator; the discrepancy workflow ranks effects to name what a model is missing.
+
+Plugins subclass these ABCs and register factories for them through the hooks in
+:mod:`physinfer.hooks`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from physinfer.parameters import ParameterSpace
+from physinfer.types import Clip, Trajectory
+
+Params = Mapping[str, float]
+
+
+class Simulator(ABC):
+    """θ → :class:`Trajectory`.
+
+    Implementations must be deterministic for a given ``seed`` and must not keep state
+    between calls that changes results. ``parameter_space`` lists every parameter the
+    simulator accepts (for an augmented model: base plus effect parameters).
+    """
+
+    parameter_space: ParameterSpace
+
+    @abstractmethod
+    def simulate(self, params: Params, *, seed: int = 0) -> Trajectory:
+        """Run one simulation.
+
+        Args:
+            params: Physical parameter values by name; must cover ``parameter_space``.
+            seed: Seed for every random choice (initial perturbation, turbulence...).
+
+        Returns:
+            The trajectory, ``vertices`` of shape ``(T, V, 3)``.
+
+        Raises:
+            SimulationFailed: when the simulation blows up or produces NaN.
+        """
+
+    def simulate_batch(self, params: Sequence[Params], *, seeds: Sequence[int]) -> list[Trajectory]:
+        """Run ``B`` simulations; the default loops, batched engines override it."""
+        return [self.simulate(p, seed=s) for p, s in zip(params, seeds, strict=True)]
+
+
+class Renderer(ABC):
+    """:class:`Trajectory` + render parameters ζ → :class:`Clip`.
+
+    ``default_render_params`` is the ζ used when none is given; ``sample_render_params``
+    draws a varied ζ for dataset generation.
+    """
+
+    default_render_params: Mapping[str, Any] = {}
+
+    @abstractmethod
+    def render(self, trajectory: Trajectory, render_params: Mapping[str, Any] | None = None) -> Clip:
+        """Render every frame of ``trajectory``; returns ``(T, H, W, 3)`` uint8 at its fps."""
+
+    def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
+        """A random ζ for dataset variety; the default is the fixed default ζ."""
+        return dict(self.default_render_params)
+
+    def close(self) -> None:  # noqa: B027 - optional hook, no-op by default
+        """Release GPU/EGL resources (optional)."""
+
+
+class Embedder(ABC):
+    """:class:`Clip` → embedding vector of shape ``(D_e,)``.
+
+    Attributes:
+        fps: Frame rate the embedder expects; clips are resampled to it.
+        n_frames: Number of frames it consumes; shorter clips are refused.
+    """
+
+    fps: float = 25.0
+    n_frames: int = 30
+
+    @abstractmethod
+    def embed(self, clip: Clip) -> np.ndarray:
+        """Embed one clip; returns a float vector ``(D_e,)``.
+
+        Raises:
+            UserInputError: when the clip is too short (fewer than ``n_frames`` after
+                resampling to ``fps``).
+        """
+
+    def embed_many(self, clips: Sequence[Clip]) -> np.ndarray:
+        """Embed several clips; returns ``(N, D_e)``."""
+        return np.stack([self.embed(c) for c in clips])
+
+
+@dataclass(frozen=True)
+class Trial:
+    """A point proposed by an optimizer.
+
+    Attributes:
+        index: The optimizer's trial index (unique within a run).
+        x: ``(D,)`` coordinates in ``[-1, 1]^D``.
+    """
+
+    index: int
+    x: np.ndarray
+
+
+class Optimizer(ABC):
+    """Ask/tell optimizer over ``[-1, 1]^D``, minimising, shaped like Ax's ``Client``.
+
+    ``ask`` proposes trials, ``attach`` registers a point chosen elsewhere (the centre
+    trial, or trials replayed on ``--resume``), ``tell`` reports a value (``None`` for a
+    failed trial). Constructors take ``dim``, ``seed`` and ``names`` as keywords.
+    """
+
+    def __init__(self, *, dim: int, seed: int = 0, names: Sequence[str] | None = None) -> None:
+        self.dim = dim
+        self.seed = seed
+        self.names = list(names) if names is not None else [f"x{i}" for i in range(dim)]
+
+    @abstractmethod
+    def ask(self, n: int = 1) -> list[Trial]:
+        """Propose up to ``n`` new trials."""
+
+    @abstractmethod
+    def attach(self, x: np.ndarray) -> Trial:
+        """Register the point ``x`` (shape ``(D,)``) as a trial to be told later."""
+
+    @abstractmethod
+    def tell(self, index: int, value: float | None, sem: float | None = None) -> None:
+        """Report the objective of trial ``index``; ``None`` marks it failed.
+
+        Args:
+            index: The trial's index.
+            value: The distance (lower is better), or ``None`` for a failed trial.
+            sem: Standard error of ``value`` if known (noisy objectives).
+        """
+
+
+class Effect(ABC):
+    """An optional physical effect a phenomenon can switch into its simulator.
+
+    Attributes:
+        name: Identifier, e.g. ``"wind_gusts"``.
+        description: One physical line, e.g. "turbulent fluctuation of the wind speed".
+        phenomenon: Name of the phenomenon whose simulator understands this effect.
+        parameter_space: The effect's extra parameters (names unique across effects);
+            a value at the low bound of the first parameter should mean "effect off"
+            where the physics allows it.
+    """
+
+    name: str
+    description: str
+    phenomenon: str
+    parameter_space: ParameterSpace
+
+    @abstractmethod
+    def term(self, state: Any, params: Params, t: float) -> Any:
+        """The extra term the simulator adds at time ``t``.
+
+        ``state`` and the return value are defined by the phenomenon's simulator (for
+        example positions/velocities in and an acceleration or wind field out).
+        """
+
+
+@dataclass(frozen=True)
+class Target:
+    """A video to refine against, with ground truth where known.
+
+    Attributes:
+        clip: The target video.
+        truth: Physical parameter values that produced it, or ``None`` (real footage).
+        render_params: The ζ to render simulations with (oracle ζ, as in the paper).
+        description: Where the target came from.
+    """
+
+    clip: Clip
+    truth: dict[str, float] | None = None
+    render_params: Mapping[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class Phenomenon:
+    """Everything the host needs to refine one phenomenon.
+
+    Attributes:
+        name: Identifier used by ``--plugin``.
+        description: One line.
+        parameter_space: The refined parameters θ.
+        make_simulator: ``(effects) -> Simulator``; ``effects`` is a sequence of
+            :class:`Effect` to switch in (empty for the baseline model).
+        make_renderer: ``() -> Renderer``.
+        default_embedder: Name of a registered embedder used when none is chosen.
+        default_target: ``() -> Target``: the embedded synthetic target.
+        dataset_generator: Optional ``"module:attr"`` or callable building a dataset.
+        effects: Names of effects registered for this phenomenon.
+        default_steps: Refinement budget used when ``--steps`` is not given.
+    """
+
+    name: str
+    description: str
+    parameter_space: ParameterSpace
+    make_simulator: Callable[[Sequence[Effect]], Simulator]
+    make_renderer: Callable[[], Renderer]
+    default_embedder: str
+    default_target: Callable[[], Target]
+    dataset_generator: Any = None
+    effects: tuple[str, ...] = ()
+    default_steps: int = 40

@@ -1,0 +1,265 @@
+"""Video input and output, generic for every plugin.
+
+Reads mp4/avi/mov/mkv/webm (PyAV), gif (Pillow) and folders of images into a
+:class:`~physinfer.types.Clip`; resamples to an embedder's frame rate, converts to
+grayscale, centre-crops and resizes; writes mp4 (H.264) and gif. Every failure a user
+can cause comes back as a :class:`~physinfer.errors.UserInputError` that says what to do.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_path
+from physinfer.types import Clip
+
+VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"}
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
+
+
+def read_video(path: str | Path, fps: float | None = None, max_frames: int | None = None) -> Clip:
+    """Read a video file or a folder of images.
+
+    Args:
+        path: A video file, a gif, or a folder whose images (sorted by name) are frames.
+        fps: Frame rate to assume; required for image folders and for files whose
+            container does not say. Overrides the container's rate when given.
+        max_frames: Stop after this many frames (None: all).
+
+    Returns:
+        RGB clip, frames ``(T, H, W, 3)`` uint8.
+
+    Raises:
+        UserInputError: missing/unreadable file, no frames, unknown frame rate.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise UserInputError(f"video {path} does not exist; check the path")
+    if path.is_dir():
+        frames, found_fps = _read_image_folder(path, max_frames), None
+    elif path.suffix.lower() == ".gif":
+        frames, found_fps = _read_gif(path, max_frames)
+    elif path.suffix.lower() in VIDEO_SUFFIXES:
+        frames, found_fps = _read_pyav(path, max_frames)
+    else:
+        raise UserInputError(
+            f"{path}: unsupported video format {path.suffix!r}; use one of "
+            f"{', '.join(sorted(VIDEO_SUFFIXES | {'.gif'}))} or a folder of images"
+        )
+    if len(frames) == 0:
+        raise UserInputError(f"{path}: the video has no frames")
+    rate = fps if fps is not None else found_fps
+    if rate is None or not math.isfinite(rate) or rate <= 0:
+        raise UserInputError(f"{path}: cannot tell the frame rate; pass it with --fps")
+    return Clip(_to_rgb(np.stack(frames)), float(rate))
+
+
+def _to_rgb(frames: np.ndarray) -> np.ndarray:
+    if frames.ndim == 3:
+        frames = frames[..., None]
+    if frames.shape[3] == 1:
+        frames = np.repeat(frames, 3, axis=3)
+    elif frames.shape[3] == 4:
+        frames = frames[..., :3]
+    if frames.dtype != np.uint8:
+        frames = np.clip(frames, 0, 255).astype(np.uint8)
+    return np.ascontiguousarray(frames)
+
+
+def _read_pyav(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], float | None]:
+    import av
+
+    try:
+        with av.open(str(path)) as container:
+            if not container.streams.video:
+                raise UserInputError(f"{path}: the file has no video stream")
+            stream = container.streams.video[0]
+            rate = stream.average_rate or stream.guessed_rate or stream.base_rate
+            frames = []
+            for frame in container.decode(stream):
+                frames.append(frame.to_ndarray(format="rgb24"))
+                if max_frames is not None and len(frames) >= max_frames:
+                    break
+    except UserInputError:
+        raise
+    except Exception as exc:  # av raises many types for corrupt input
+        raise UserInputError(f"{path}: cannot decode the video ({type(exc).__name__}: {exc})") from None
+    return frames, float(rate) if rate else None
+
+
+def _read_gif(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], float | None]:
+    from PIL import Image, ImageSequence
+
+    try:
+        with Image.open(path) as im:
+            frames, durations = [], []
+            for frame in ImageSequence.Iterator(im):
+                frames.append(np.asarray(frame.convert("RGB")))
+                durations.append(frame.info.get("duration"))
+                if max_frames is not None and len(frames) >= max_frames:
+                    break
+    except Exception as exc:
+        raise UserInputError(f"{path}: cannot read the gif ({type(exc).__name__}: {exc})") from None
+    known = [d for d in durations if d]
+    return frames, (1000.0 / float(np.median(known))) if known else None
+
+
+def _read_image_folder(path: Path, max_frames: int | None) -> list[np.ndarray]:
+    from PIL import Image
+
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise UserInputError(f"{path}: the folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+    frames = []
+    for f in files[:max_frames]:
+        try:
+            with Image.open(f) as im:
+                frames.append(np.asarray(im.convert("RGB")))
+        except Exception as exc:
+            raise UserInputError(f"{f}: cannot read image ({exc})") from None
+    if len({fr.shape for fr in frames}) > 1:
+        raise UserInputError(f"{path}: the images differ in size; all frames must be the same size")
+    return frames
+
+
+def resample(clip: Clip, fps: float) -> Clip:
+    """Resample to ``fps`` by nearest-frame sampling at the new frame times.
+
+    Duration is kept: ``n_out = round(T * fps / clip.fps)``.
+    """
+    if abs(clip.fps - fps) < 1e-6:
+        return clip
+    n_out = max(1, int(round(clip.n_frames * fps / clip.fps)))
+    times = np.arange(n_out) / fps
+    idx = np.clip(np.round(times * clip.fps).astype(int), 0, clip.n_frames - 1)
+    return Clip(clip.frames[idx], float(fps))
+
+
+def to_gray(frames: np.ndarray) -> np.ndarray:
+    """``(T, H, W, 3)`` uint8 → ``(T, H, W)`` float32 luma in [0, 1] (ITU-R BT.601)."""
+    f = frames.astype(np.float32) / 255.0
+    if f.shape[-1] == 1:
+        return f[..., 0]
+    return f[..., 0] * 0.299 + f[..., 1] * 0.587 + f[..., 2] * 0.114
+
+
+def center_crop_resize(frames: np.ndarray, size: int | tuple[int, int]) -> np.ndarray:
+    """Centre-crop to the target aspect ratio, then resize (area/bilinear via Pillow).
+
+    Args:
+        frames: ``(T, H, W)`` float32 or ``(T, H, W, C)`` uint8.
+        size: Output ``(H, W)`` or a single side for square output.
+
+    Returns:
+        Frames of the same kind with spatial size ``size``.
+    """
+    from PIL import Image
+
+    out_h, out_w = (size, size) if isinstance(size, int) else size
+    h, w = frames.shape[1:3]
+    if (h, w) == (out_h, out_w):
+        return frames
+    target_aspect = out_w / out_h
+    if w / h > target_aspect:
+        cw, ch = int(round(h * target_aspect)), h
+    else:
+        cw, ch = w, int(round(w / target_aspect))
+    y0, x0 = (h - ch) // 2, (w - cw) // 2
+    cropped = frames[:, y0 : y0 + ch, x0 : x0 + cw]
+    resized = []
+    for fr in cropped:
+        mode = "F" if fr.dtype == np.float32 and fr.ndim == 2 else None
+        im = Image.fromarray(fr, mode=mode) if mode else Image.fromarray(fr)
+        resized.append(np.asarray(im.resize((out_w, out_h), Image.Resampling.BILINEAR, reducing_gap=2.0)))
+    return np.stack(resized).astype(frames.dtype)
+
+
+def prepare_for_embedding(clip: Clip, *, fps: float, n_frames: int, size: int) -> np.ndarray:
+    """Resample, check length, take the first ``n_frames``, grayscale, crop and resize.
+
+    Returns:
+        ``(n_frames, size, size)`` float32 in [0, 1].
+
+    Raises:
+        UserInputError: when the clip is shorter than ``n_frames`` at ``fps``.
+    """
+    clip = resample(clip, fps)
+    if clip.n_frames < n_frames:
+        raise UserInputError(
+            f"the clip is too short: {clip.n_frames} frames at {fps:g} fps "
+            f"({clip.n_frames / fps:.2f} s); the embedder needs at least {n_frames} frames "
+            f"({n_frames / fps:.2f} s)"
+        )
+    return center_crop_resize(to_gray(clip.frames[:n_frames]), size)
+
+
+def write_video(path: str | Path, frames: np.ndarray | Clip, fps: float | None = None) -> Path:
+    """Write ``(T, H, W, 3)`` uint8 frames as mp4 (H.264, yuv420p) or gif, atomically.
+
+    Odd frame sizes are padded by one pixel for H.264.
+    """
+    if isinstance(frames, Clip):
+        frames, fps = frames.frames, frames.fps if fps is None else fps
+    if fps is None:
+        raise ValueError("fps is required")
+    path = Path(path)
+    frames = _to_rgb(np.asarray(frames))
+    suffix = path.suffix.lower()
+    with atomic_path(path, suffix=suffix) as tmp:
+        if suffix == ".gif":
+            _write_gif(tmp, frames, fps)
+        elif suffix in VIDEO_SUFFIXES:
+            _write_pyav(tmp, frames, fps)
+        else:
+            raise UserInputError(f"{path}: write .mp4 or .gif, not {suffix!r}")
+    return path
+
+
+def _write_pyav(path: Path, frames: np.ndarray, fps: float) -> None:
+    from fractions import Fraction
+
+    import av
+
+    pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
+    if pad_h or pad_w:
+        frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+    rate = Fraction(fps).limit_denominator(1001)
+    with av.open(str(path), mode="w", format="mp4") as container:
+        stream = container.add_stream("libx264", rate=rate)
+        stream.width, stream.height = frames.shape[2], frames.shape[1]
+        stream.pix_fmt = "yuv420p"
+        stream.options = {"crf": "18", "preset": "veryfast"}
+        for fr in frames:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(fr, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+
+
+def _write_gif(path: Path, frames: np.ndarray, fps: float) -> None:
+    from PIL import Image
+
+    images = [Image.fromarray(f) for f in frames]
+    images[0].save(
+        path, format="GIF", save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0
+    )
+
+
+def side_by_side(clips: Sequence[Clip], height: int = 224) -> Clip:
+    """Place clips next to each other (resized to ``height``), at the first clip's fps.
+
+    Clips are resampled to a common rate and cut to the shortest duration.
+    """
+    fps = clips[0].fps
+    resampled = [resample(c, fps) for c in clips]
+    n = min(c.n_frames for c in resampled)
+    panels = []
+    for c in resampled:
+        h, w = c.size
+        panels.append(center_crop_resize(c.frames[:n], (height, max(2, int(round(w * height / h))))))
+    return Clip(np.concatenate(panels, axis=2), fps)

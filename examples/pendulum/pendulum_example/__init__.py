@@ -1,0 +1,1 @@
+"""A damped pendulum: the worked example of a physinfer phenomenon plugin."""

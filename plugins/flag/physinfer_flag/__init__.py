@@ -1,0 +1,1 @@
+"""physinfer's flag plugin: cloth physics, pyrender renderer, SDN embedder, FlagSim."""
