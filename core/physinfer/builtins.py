@@ -14,3 +14,12 @@ def physinfer_register_optimizers(registry: Registry) -> None:
     registry.add_optimizer("ax", "physinfer.optimizers.ax:AxOptimizer", "Bayesian optimisation (Ax, GP with Matérn-5/2)")
     registry.add_optimizer("random", "physinfer.optimizers.random:RandomOptimizer", "uniform random search")
     registry.add_optimizer("cma", "physinfer.optimizers.cma:CMAOptimizer", "CMA-ES (pycma)")
+
+
+@hookimpl
+def physinfer_register_embedders(registry: Registry) -> None:
+    registry.add_embedder(
+        "grid_spectrum",
+        "physinfer.embedders:GridSpectrumEmbedder",
+        "parameter-free: pixel spectra pooled over a grid (any phenomenon)",
+    )

@@ -1,0 +1,290 @@
+"""The ``physinfer`` command line (typer).
+
+Every command that computes a result takes ``--json`` and then prints exactly one JSON
+object on stdout; progress and logs go to stderr. User mistakes end with one line on
+stderr (and ``{"error": ...}`` on stdout with ``--json``) and exit status 2. Heavy
+libraries are imported inside commands, so ``physinfer --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+
+from physinfer.errors import PhysinferError, UserInputError
+
+err_console = Console(stderr=True)
+
+app = typer.Typer(
+    name="physinfer",
+    help="Measure physical parameters from video by refining simulations until they match.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")]
+PluginOpt = Annotated[str, typer.Option("--plugin", "-p", help="Phenomenon to use (see `physinfer plugins`).")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the optimizer and of every simulation.")]
+
+
+@functools.cache
+def registry_and_infos() -> tuple[Any, Any]:
+    """The registry of all installed plugins, built once per process."""
+    from physinfer.plugins import load_registry
+
+    return load_registry()
+
+
+def emit_json(obj: Any) -> None:
+    """Print one JSON object on stdout."""
+    from physinfer.io import to_jsonable
+
+    sys.stdout.write(json.dumps(to_jsonable(obj), allow_nan=False) + "\n")
+    sys.stdout.flush()
+
+
+def handle_errors(as_json_param: str = "as_json") -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Turn user errors into one clear line and exit status 2 (JSON error object with ``--json``)."""
+
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(func)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return func(*args, **kwargs)
+            except (UserInputError, PhysinferError) as exc:
+                err_console.print(f"[bold red]error:[/] {exc}", highlight=False)
+                if kwargs.get(as_json_param):
+                    emit_json({"error": str(exc)})
+                raise typer.Exit(2) from None
+            except KeyboardInterrupt:
+                err_console.print("interrupted; completed trials are saved — continue with --resume")
+                raise typer.Exit(130) from None
+
+        return wrapper
+
+    return decorate
+
+
+def parse_render_set(items: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` render settings; numbers become floats, ``true``/``false`` booleans."""
+    from physinfer.parameters import parse_assignments
+
+    out: dict[str, Any] = {}
+    for name, raw in parse_assignments(items, "--render-set").items():
+        low = raw.lower()
+        if low in ("true", "false"):
+            out[name] = low == "true"
+            continue
+        try:
+            out[name] = float(raw)
+        except ValueError:
+            out[name] = raw
+    return out
+
+
+# --------------------------------------------------------------------------- plugins
+
+
+@app.command("plugins")
+@handle_errors()
+def plugins_cmd(
+    as_json: JsonOpt = False,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Show tracebacks of broken plugins.")] = False,
+) -> None:
+    """List installed plugins and what each provides; broken plugins with their error."""
+    registry, infos = registry_and_infos()
+    rows = []
+    for name, info in sorted(infos.items()):
+        provided = registry.by_plugin(name)
+        rows.append(
+            {
+                "name": name,
+                "distribution": info.distribution,
+                "version": info.version,
+                "module": info.module,
+                "phenomena": provided["phenomena"],
+                "optimizers": provided["optimizers"],
+                "embedders": provided["embedders"],
+                "effects": provided["effects"],
+                "commands": provided["commands"],
+                "error": info.error,
+            }
+        )
+    if as_json:
+        emit_json({"plugins": rows, "phenomena": sorted(registry.entries["phenomena"])})
+        return
+    from rich.table import Table
+
+    table = Table(title="physinfer plugins")
+    for col in ("plugin", "distribution", "phenomena", "optimizers", "embedders", "effects", "status"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            r["name"],
+            f"{r['distribution'] or '-'} {r['version'] or ''}".strip(),
+            ", ".join(r["phenomena"]),
+            ", ".join(r["optimizers"]),
+            ", ".join(r["embedders"]),
+            ", ".join(r["effects"]),
+            "[red]" + r["error"] + "[/]" if r["error"] else "ok",
+        )
+    Console().print(table)
+    if verbose:
+        for name, info in infos.items():
+            if info.traceback:
+                err_console.print(f"[bold]{name}[/]\n{info.traceback}", highlight=False)
+
+
+# -------------------------------------------------------------------------- simulate
+
+
+@app.command("simulate")
+@handle_errors()
+def simulate_cmd(
+    plugin: PluginOpt,
+    set_: Annotated[list[str], typer.Option("--set", help="Parameter value NAME=VALUE (repeatable).")] = [],  # noqa: B006
+    effect: Annotated[list[str], typer.Option("--effect", help="Switch an effect in (repeatable).")] = [],  # noqa: B006
+    render_set: Annotated[
+        list[str], typer.Option("--render-set", help="Render setting NAME=VALUE (repeatable).")
+    ] = [],  # noqa: B006
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option("--out", help="Video to write (.mp4 or .gif).")] = None,
+    trajectory_out: Annotated[
+        Path | None, typer.Option("--trajectory-out", help="Trajectory NPZ to write.")
+    ] = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Run one simulation and render it to a video (and/or save the trajectory)."""
+    from physinfer.parameters import parse_float_assignments
+    from physinfer.session import build_pipeline
+
+    if out is None and trajectory_out is None:
+        raise UserInputError("nothing to write: give --out VIDEO and/or --trajectory-out FILE.npz")
+    if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
+        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+    registry, _ = registry_and_infos()
+    pipeline = build_pipeline(registry, plugin, effects=effect, embedder=None)
+    params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
+    t0 = time.perf_counter()
+    trajectory = pipeline.simulator.simulate(params, seed=seed)
+    sim_s = time.perf_counter() - t0
+    result: dict[str, Any] = {"plugin": plugin, "params": params, "effects": effect, "seed": seed}
+    result.update(simulate_s=sim_s, n_frames=trajectory.n_frames, fps=trajectory.fps)
+    if trajectory_out is not None:
+        trajectory.save(trajectory_out)
+        result["trajectory"] = str(trajectory_out)
+    if out is not None:
+        from physinfer.video import write_video
+
+        zeta = {**pipeline.renderer.default_render_params, **parse_render_set(render_set)}
+        t1 = time.perf_counter()
+        clip = pipeline.renderer.render(trajectory, zeta)
+        result["render_s"] = time.perf_counter() - t1
+        write_video(out, clip)
+        result.update(video=str(out), render_params=zeta)
+    if as_json:
+        emit_json(result)
+    else:
+        err_console.print(f"wrote {', '.join(str(p) for p in (out, trajectory_out) if p)}")
+
+
+# ---------------------------------------------------------------------------- refine
+
+
+@app.command("refine")
+@handle_errors()
+def refine_cmd(
+    plugin: PluginOpt,
+    target: Annotated[
+        Path | None, typer.Option("--target", help="Video to match; default: the plugin's embedded target.")
+    ] = None,
+    fps: Annotated[float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")] = None,
+    truth: Annotated[
+        list[str], typer.Option("--truth", help="Known true value NAME=VALUE, for error reporting.")
+    ] = [],  # noqa: B006
+    steps: Annotated[int | None, typer.Option("--steps", help="Trials in all (default: the plugin's).")] = None,
+    optimizer: Annotated[str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")] = "ax",
+    embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
+    weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
+    device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
+    effect: Annotated[list[str], typer.Option("--effect", help="Switch an effect in (repeatable).")] = [],  # noqa: B006
+    render_set: Annotated[
+        list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
+    ] = [],  # noqa: B006
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a finished run in --out.")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Refine a simulation until it matches a target video; report the parameters found."""
+    from physinfer.session import refine
+
+    if resume and out is None:
+        raise UserInputError("--resume needs --out DIR (the run directory to continue)")
+    if out is None:
+        out = Path("runs") / f"{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
+    registry, _ = registry_and_infos()
+    result = refine(
+        registry,
+        plugin=plugin,
+        target_path=target,
+        fps=fps,
+        truth=truth,
+        steps=steps,
+        optimizer=optimizer,
+        embedder=embedder,
+        weights=weights,
+        device=device,
+        effects=effect,
+        render_set=parse_render_set(render_set),
+        seed=seed,
+        out=out,
+        resume=resume,
+        overwrite=overwrite,
+        progress=True,
+    )
+    summary = result.summary()
+    if as_json:
+        emit_json(summary)
+        return
+    err_console.print(f"[bold]best distance[/] {result.best_distance:.4g} at step {result.best_step}")
+    for name, value in result.best_params.items():
+        line = f"  {name} = {value:.4g}"
+        if result.abs_errors and name in result.abs_errors:
+            line += f"   (truth {result.ground_truth[name]:.4g}, error {result.abs_errors[name]:.3g})"
+        err_console.print(line, highlight=False)
+    err_console.print(f"results in {result.run_dir}")
+
+
+# ------------------------------------------------------------- plugin-registered commands
+
+
+def _mount_plugin_commands() -> None:
+    """Add commands registered through ``physinfer_register_commands``; skip broken ones."""
+    registry, infos = registry_and_infos()
+    for name, entry in sorted(registry.entries["commands"].items()):
+        try:
+            obj = entry.load()
+        except Exception as exc:  # report, don't break the CLI
+            infos[entry.plugin].error = f"command {name!r}: {type(exc).__name__}: {exc}"
+            continue
+        if isinstance(obj, typer.Typer):
+            app.add_typer(obj, name=name, help=entry.description or None)
+        else:
+            app.command(name, help=entry.description or None)(obj)
+
+
+def run() -> None:
+    """Entry point of the ``physinfer`` console script."""
+    _mount_plugin_commands()
+    app()

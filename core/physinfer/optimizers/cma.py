@@ -1,0 +1,81 @@
+"""CMA-ES (pycma) over ``[-1, 1]^D``, started at the centre.
+
+CMA-ES needs a value for every member of a generation, so a failed trial is told as
+a penalty (the worst value seen, times two, plus one) rather than dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physinfer.roles import Optimizer, Trial
+
+
+class CMAOptimizer(Optimizer):
+    """Ask/tell wrapper of ``cma.CMAEvolutionStrategy`` with bounds ``[-1, 1]``.
+
+    Args:
+        dim: Number of parameters ``D``.
+        seed: CMA-ES seed.
+        names: Parameter names (unused).
+        sigma0: Initial step size in normalised units.
+        popsize: Population size (default: pycma's ``4 + 3 ln D``).
+    """
+
+    def __init__(
+        self,
+        *,
+        dim: int,
+        seed: int = 0,
+        names: list[str] | None = None,
+        sigma0: float = 0.4,
+        popsize: int | None = None,
+    ) -> None:
+        import cma
+
+        super().__init__(dim=dim, seed=seed, names=names)
+        opts = {"bounds": [-1.0, 1.0], "seed": seed + 1, "verbose": -9}
+        if popsize is not None:
+            opts["popsize"] = popsize
+        x0 = np.zeros(dim)
+        if dim == 1:  # pycma refuses 1-D problems; optimise a padded 2-D one
+            x0 = np.zeros(2)
+        self._es = cma.CMAEvolutionStrategy(x0, sigma0, opts)
+        self._next = 0
+        self._queue: list[np.ndarray] = []
+        self._points: dict[int, np.ndarray] = {}
+        self._done: dict[int, float | None] = {}
+        self._worst = 0.0
+
+    def _full(self, x: np.ndarray) -> np.ndarray:
+        return x if self.dim > 1 else np.append(x, 0.0)
+
+    def _new(self, x_full: np.ndarray) -> Trial:
+        idx = self._next
+        self._next += 1
+        self._points[idx] = np.asarray(x_full, dtype=float)
+        return Trial(idx, self._points[idx][: self.dim].copy())
+
+    def ask(self, n: int = 1) -> list[Trial]:
+        trials = []
+        for _ in range(n):
+            if not self._queue:
+                self._queue = list(self._es.ask())
+            trials.append(self._new(self._queue.pop(0)))
+        return trials
+
+    def attach(self, x: np.ndarray) -> Trial:
+        return self._new(self._full(np.asarray(x, dtype=float)))
+
+    def tell(self, index: int, value: float | None, sem: float | None = None) -> None:
+        if value is not None:
+            self._worst = max(self._worst, value)
+        self._done[index] = value
+        popsize = self._es.popsize
+        if len(self._done) >= popsize:
+            ids = sorted(self._done)[:popsize]
+            xs = [self._points.pop(i) for i in ids]
+            fs = [self._done.pop(i) for i in ids]
+            fs = [2 * self._worst + 1 if f is None else f for f in fs]
+            self._es.tell(xs, fs)
+            self._queue = []  # the distribution moved: old proposals are stale

@@ -1,0 +1,278 @@
+"""The refinement loop: the paper's method, for any phenomenon.
+
+Embed the target once; then, each step, ask the optimizer for θ in ``[-1, 1]^D`` (the
+first trial is the centre, 0), denormalise, simulate, render with fixed render
+parameters ζ, embed, and tell the optimizer the squared Euclidean distance. A
+simulation that raises, returns NaN or blows up is a failed trial and the run goes on.
+Every trial is appended to the run directory as it completes, so an interrupted run
+continues with ``resume=True``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.errors import SimulationFailed, UserInputError
+from physinfer.io import atomic_write_json
+from physinfer.roles import Effect, Embedder, Optimizer, Phenomenon, Renderer, Simulator, Target
+from physinfer.rundir import RunDirectory, TrialRecord
+
+#: run.json keys that must match for ``--resume``.
+RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder")
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Settings of one refinement.
+
+    Attributes:
+        steps: Total number of trials (including the centre trial and resumed ones).
+        optimizer: Registered optimizer name.
+        seed: Seed of the optimizer and of every simulation (so a θ maps to one clip).
+        noise_sem: Standard error of the distance told to the optimizer (``None``:
+            treat observations as exact / let the optimizer infer the noise).
+        log_objective: Tell the optimizer ``log(D)`` instead of ``D``. The minimiser is the
+            same, but the landscape is far smoother (distances span orders of magnitude),
+            which suits a GP surrogate; results always report ``D`` itself.
+    """
+
+    steps: int = 40
+    optimizer: str = "ax"
+    seed: int = 0
+    noise_sem: float | None = None
+    log_objective: bool = True
+
+    def objective(self, distance: float | None) -> float | None:
+        """The value told to the optimizer for a distance (``None`` stays ``None``)."""
+        if distance is None or not self.log_objective:
+            return distance
+        return float(np.log(distance + 1e-12))
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` for a non-positive budget."""
+        if self.steps < 1:
+            raise UserInputError(f"--steps must be at least 1, got {self.steps}")
+
+
+@dataclass
+class RefineResult:
+    """What a refinement found.
+
+    Attributes:
+        best_params: Physical values of the best trial.
+        best_distance: Its distance.
+        best_step: Its step.
+        ground_truth: Truth of the target where known.
+        abs_errors: ``|best - truth|`` per parameter where truth is known.
+        n_trials: Trials logged (successful and failed).
+        n_failed: Failed trials.
+        wall_time_s: Wall time of this invocation.
+        timings: Seconds summed over all trials per phase.
+        run_dir: The run directory.
+        trials: All trial records (not in the JSON summary).
+    """
+
+    best_params: dict[str, float]
+    best_distance: float
+    best_step: int
+    ground_truth: dict[str, float] | None
+    abs_errors: dict[str, float] | None
+    n_trials: int
+    n_failed: int
+    wall_time_s: float
+    timings: dict[str, float]
+    run_dir: str
+    extra: dict[str, Any] = field(default_factory=dict)
+    trials: list[TrialRecord] = field(default_factory=list, repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON-ready result (without the per-trial list)."""
+        out = asdict(self)
+        out.pop("trials")
+        out.update(out.pop("extra"))
+        return out
+
+
+@dataclass
+class Pipeline:
+    """The built roles of one phenomenon for one run."""
+
+    phenomenon: Phenomenon
+    simulator: Simulator
+    renderer: Renderer
+    embedder: Embedder
+    effects: Sequence[Effect] = ()
+
+
+def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """``||a - b||²``, the paper's distance."""
+    return float(np.sum((np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)) ** 2))
+
+
+def evaluate(
+    pipeline: Pipeline,
+    params: Mapping[str, float],
+    target_embedding: np.ndarray,
+    render_params: Mapping[str, Any],
+    seed: int,
+) -> tuple[float | None, str | None, dict[str, float]]:
+    """Simulate, render and embed one θ; returns ``(distance, error, timings)``.
+
+    A failing simulation gives ``(None, reason, timings)``; render and embed errors
+    propagate (they are not properties of θ).
+    """
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    try:
+        trajectory = pipeline.simulator.simulate(params, seed=seed)
+        if not trajectory.is_finite():
+            raise SimulationFailed("the simulation produced NaN or infinite positions")
+    except Exception as exc:  # any simulator failure is a property of this θ
+        timings["simulate"] = time.perf_counter() - t0
+        return None, f"{type(exc).__name__}: {exc}", timings
+    t1 = time.perf_counter()
+    clip = pipeline.renderer.render(trajectory, render_params)
+    t2 = time.perf_counter()
+    embedding = pipeline.embedder.embed(clip)
+    t3 = time.perf_counter()
+    timings.update(simulate=t1 - t0, render=t2 - t1, embed=t3 - t2)
+    distance = squared_distance(embedding, target_embedding)
+    if not np.isfinite(distance):
+        return None, "the embedding distance is not finite", timings
+    return distance, None, timings
+
+
+def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig) -> None:
+    """Feed logged trials back to a fresh optimizer so it continues where the run stopped."""
+    for rec in records:
+        trial = optimizer.attach(np.asarray(rec.x, dtype=float))
+        optimizer.tell(trial.index, config.objective(rec.distance), config.noise_sem if rec.distance is not None else None)
+
+
+def run_refinement(
+    pipeline: Pipeline,
+    target: Target,
+    optimizer_factory: Callable[..., Optimizer],
+    run_dir: RunDirectory,
+    config: RefineConfig,
+    *,
+    run_info: dict[str, Any],
+    resume: bool = False,
+    on_trial: Callable[[TrialRecord, float], None] | None = None,
+) -> RefineResult:
+    """Run (or continue) a refinement and log every trial to ``run_dir``.
+
+    Args:
+        pipeline: Simulator, renderer and embedder of the phenomenon.
+        target: The clip to match, its oracle ζ and truth if known.
+        optimizer_factory: Builds the optimizer with ``dim``, ``seed``, ``names``.
+        run_dir: Where trials are logged.
+        config: Budget, optimizer and seed.
+        run_info: What is stored in ``run.json`` (checked on resume).
+        resume: Continue the trials already logged.
+        on_trial: Called after each trial with the record and the best distance so far.
+
+    Returns:
+        The :class:`RefineResult` (also written by :func:`physinfer.report.write_report`).
+    """
+    config.validate()
+    start = time.perf_counter()
+    space = pipeline.simulator.parameter_space
+    # Embed first: a target the embedder refuses (too short, unreadable) leaves no run behind.
+    target_embedding = pipeline.embedder.embed(target.clip)
+    if resume:
+        run_dir.check_compatible(run_info, RESUME_KEYS)
+        records = run_dir.read_trials()
+    else:
+        run_dir.create(run_info, overwrite=bool(run_info.get("overwrite")))
+        records = []
+    optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
+    _replay(optimizer, records, config)
+    best = min((r.distance for r in records if r.distance is not None), default=float("inf"))
+
+    for step in range(len(records), config.steps):
+        t0 = time.perf_counter()
+        trial = optimizer.attach(np.zeros(len(space))) if step == 0 else optimizer.ask(1)[0]
+        t_ask = time.perf_counter() - t0
+        params = space.from_unit(trial.x)
+        distance, error, timings = evaluate(pipeline, params, target_embedding, target.render_params, config.seed)
+        t1 = time.perf_counter()
+        optimizer.tell(trial.index, config.objective(distance), config.noise_sem if distance is not None else None)
+        timings["optimizer"] = t_ask + time.perf_counter() - t1
+        record = TrialRecord(
+            step=step,
+            index=trial.index,
+            x=[float(v) for v in trial.x],
+            params=params,
+            distance=distance,
+            status="ok" if distance is not None else "failed",
+            error=error,
+            timings=timings,
+        )
+        run_dir.append_trial(record)
+        records.append(record)
+        if distance is not None:
+            best = min(best, distance)
+        if on_trial is not None:
+            on_trial(record, best)
+    return summarise(records, space.names, target, run_dir.path, time.perf_counter() - start)
+
+
+def summarise(
+    records: Sequence[TrialRecord],
+    names: Sequence[str],
+    target: Target,
+    run_dir: Path,
+    wall_time_s: float,
+) -> RefineResult:
+    """Best trial, errors against truth, and timing totals of a list of trials."""
+    ok = [r for r in records if r.distance is not None]
+    if not ok:
+        raise UserInputError(
+            f"every one of the {len(records)} trials failed (first error: {records[0].error if records else 'none'}); "
+            "nothing to report. Check the parameter bounds and the simulator settings."
+        )
+    best = min(ok, key=lambda r: r.distance)
+    truth = dict(target.truth) if target.truth else None
+    abs_errors = (
+        {n: abs(best.params[n] - truth[n]) for n in names if n in truth and n in best.params} if truth else None
+    )
+    phases = ("simulate", "render", "embed", "optimizer")
+    timings = {f"{p}_s": float(sum(r.timings.get(p, 0.0) for r in records)) for p in phases}
+    return RefineResult(
+        best_params=dict(best.params),
+        best_distance=float(best.distance),
+        best_step=best.step,
+        ground_truth=truth,
+        abs_errors=abs_errors,
+        n_trials=len(records),
+        n_failed=len(records) - len(ok),
+        wall_time_s=wall_time_s,
+        timings=timings,
+        run_dir=str(run_dir),
+        trials=list(records),
+    )
+
+
+def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_dir: RunDirectory, seed: int) -> None:
+    """Write ``result.json``, the refinement plot, the best trajectory and the side-by-side video."""
+    from physinfer.plotting import plot_refinement
+    from physinfer.video import side_by_side, write_video
+
+    best_traj = pipeline.simulator.simulate(result.best_params, seed=seed)
+    best_traj.save(run_dir.path / "best_trajectory.npz")
+    best_clip = pipeline.renderer.render(best_traj, target.render_params)
+    write_video(run_dir.path / "side_by_side.mp4", side_by_side([target.clip, best_clip]))
+    plot_refinement(result.trials, result.ground_truth, run_dir.path / "refinement.png")
+    result.extra.setdefault("outputs", {})
+    result.extra["outputs"] = {
+        name: str(run_dir.path / name)
+        for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
+    }
+    atomic_write_json(run_dir.path / "result.json", result.summary())

@@ -1,0 +1,176 @@
+"""Glue between the registry and the loop: build a phenomenon's pipeline, load a
+target, run a refinement with a progress bar and write its outputs.
+
+The CLI calls these functions; notebooks and benchmarks can call them too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from physinfer.errors import UserInputError
+from physinfer.parameters import parse_float_assignments
+from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
+from physinfer.registry import Registry
+from physinfer.roles import Target
+from physinfer.rundir import RunDirectory, TrialRecord
+
+
+def build_pipeline(
+    registry: Registry,
+    plugin: str,
+    *,
+    effects: Sequence[str] = (),
+    embedder: str | None = None,
+    weights: Path | None = None,
+    device: str | None = None,
+) -> Pipeline:
+    """Build simulator (with effects), renderer and embedder of a phenomenon.
+
+    Args:
+        registry: Loaded plugin registry.
+        plugin: Phenomenon name.
+        effects: Effect names to switch in.
+        embedder: Embedder name, ``None`` for the phenomenon's default; ``""`` for none.
+        weights: Embedder weights file (``None``: the shipped default).
+        device: torch device for the embedder.
+    """
+    phenomenon = registry.phenomenon(plugin)
+    effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
+    simulator = phenomenon.make_simulator(effect_objs)
+    renderer = phenomenon.make_renderer()
+    embedder_obj: Any = None
+    if embedder != "":
+        name = embedder or phenomenon.default_embedder
+        embedder_obj = registry.embedder(name, model=str(weights) if weights else None, device=device)
+    return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
+
+
+def load_target(
+    pipeline: Pipeline,
+    target_path: Path | None,
+    *,
+    fps: float | None,
+    truth: Sequence[str],
+    render_set: Mapping[str, Any],
+) -> Target:
+    """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target."""
+    truth_values = parse_float_assignments(truth, "--truth")
+    space = pipeline.simulator.parameter_space
+    for name in truth_values:
+        space[name]  # unknown names fail with the list of known ones
+    if target_path is None:
+        target = pipeline.phenomenon.default_target()
+        zeta = {**target.render_params, **render_set}
+        merged_truth = {**(target.truth or {}), **truth_values}
+        return Target(target.clip, merged_truth or None, zeta, target.description)
+    from physinfer.video import read_video
+
+    clip = read_video(target_path, fps=fps)
+    zeta = {**pipeline.renderer.default_render_params, **render_set}
+    return Target(clip, truth_values or None, zeta, str(target_path))
+
+
+def refine(
+    registry: Registry,
+    *,
+    plugin: str,
+    target_path: Path | None = None,
+    fps: float | None = None,
+    truth: Sequence[str] = (),
+    steps: int | None = None,
+    optimizer: str = "ax",
+    embedder: str | None = None,
+    weights: Path | None = None,
+    device: str | None = None,
+    effects: Sequence[str] = (),
+    render_set: Mapping[str, Any] | None = None,
+    seed: int = 0,
+    out: Path,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> RefineResult:
+    """Run or continue a refinement end to end and write every output into ``out``."""
+    registry.get("optimizers", optimizer)  # fail early, listing the installed ones
+    pipeline = build_pipeline(registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device)
+    budget = steps if steps is not None else pipeline.phenomenon.default_steps
+    config = RefineConfig(steps=budget, optimizer=optimizer, seed=seed)
+    config.validate()
+    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {})
+    run_dir = RunDirectory(out)
+    if resume:
+        stored = run_dir.load_run_info()
+        if stored.get("target") not in (None, "default") and target_path is None:
+            raise UserInputError(f"{out} was run against --target {stored['target']}; pass the same --target")
+    run_info = {
+        "plugin": plugin,
+        "optimizer": optimizer,
+        "seed": seed,
+        "steps": budget,
+        "effects": list(effects),
+        "embedder": embedder or pipeline.phenomenon.default_embedder,
+        "parameters": pipeline.simulator.parameter_space.to_dict(),
+        "target": str(target_path) if target_path else "default",
+        "render_params": dict(target.render_params),
+        "truth": target.truth,
+        "overwrite": overwrite,
+    }
+    if not resume:
+        _refuse_clobber(run_dir, overwrite)
+    factory = registry.get("optimizers", optimizer).load()
+    with _progress(budget, enabled=progress) as on_trial:
+        result = run_refinement(
+            pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
+        )
+    from physinfer.video import write_video
+
+    write_video(run_dir.path / "target.mp4", target.clip)
+    write_outputs(result, pipeline, target, run_dir, seed)
+    pipeline.renderer.close()
+    return result
+
+
+def _refuse_clobber(run_dir: RunDirectory, overwrite: bool) -> None:
+    if run_dir.run_file.exists() and not overwrite:
+        raise UserInputError(
+            f"{run_dir.path} already holds a run; continue it with --resume, choose another --out, "
+            "or pass --overwrite to start over"
+        )
+
+
+class _progress:
+    """A rich progress bar on stderr showing the best distance; yields an ``on_trial`` callback."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.enabled = total, enabled
+
+    def __enter__(self):  # noqa: ANN204
+        if not self.enabled:
+            return None
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        from physinfer.cli.app import err_console
+
+        self._bar = Progress(
+            TextColumn("refining"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("best {task.fields[best]}"),
+            TimeRemainingColumn(),
+            console=err_console,
+            transient=False,
+        )
+        self._bar.__enter__()
+        self._task = self._bar.add_task("refine", total=self.total, best="-")
+
+        def on_trial(record: TrialRecord, best: float) -> None:
+            self._bar.update(self._task, completed=record.step + 1, best=f"{best:.4g}")
+
+        return on_trial
+
+    def __exit__(self, *exc: object) -> None:
+        if self.enabled:
+            self._bar.__exit__(*exc)
