@@ -1,0 +1,102 @@
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.types import Clip
+from physinfer.video import write_video
+
+BIN = Path(sys.executable).parent / "physinfer"
+
+
+def run_cli(*args, check=True, timeout=300):
+    proc = subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"exit {proc.returncode}\nstdout: {proc.stdout}\nstderr: {proc.stderr}")
+    return proc
+
+
+def json_out(proc):
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1, f"expected exactly one JSON line on stdout, got: {proc.stdout!r}"
+    return json.loads(lines[0])
+
+
+def test_help_is_fast_and_imports_no_heavy_library():
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        run_cli("--help")
+        times.append(time.perf_counter() - t0)
+    assert min(times) < 1.0, f"physinfer --help took {min(times):.2f} s"
+    code = (
+        "import sys; from physinfer.cli.app import _mount_plugin_commands; _mount_plugin_commands(); "
+        "heavy = [m for m in ('torch', 'pyrender', 'ax', 'botorch', 'OpenGL') if m in sys.modules]; print(heavy)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", f"--help imports heavy modules: {out}"
+
+
+def test_plugins_json_lists_example_and_optimizers():
+    data = json_out(run_cli("plugins", "--json"))
+    by_name = {p["name"]: p for p in data["plugins"]}
+    assert by_name["pendulum"]["phenomena"] == ["pendulum"]
+    assert by_name["pendulum"]["effects"] == ["quadratic_drag"]
+    assert by_name["pendulum"]["distribution"] == "physinfer-pendulum-example"
+    assert set(by_name["builtins"]["optimizers"]) == {"ax", "random", "cma"}
+    for key in ("name", "distribution", "version", "phenomena", "optimizers", "embedders", "effects", "error"):
+        assert key in by_name["builtins"]
+
+
+def test_simulate_writes_video_and_trajectory(tmp_path):
+    out, traj = tmp_path / "p.mp4", tmp_path / "p.npz"
+    data = json_out(
+        run_cli("simulate", "--plugin", "pendulum", "--set", "length=0.8", "--out", str(out),
+                "--trajectory-out", str(traj), "--json")
+    )
+    assert data["params"]["length"] == 0.8 and out.stat().st_size > 1000
+    with np.load(traj, allow_pickle=False) as z:
+        assert z["vertices"].shape[0] == data["n_frames"] and z["faces"].shape[1] == 3
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["refine", "--plugin", "nope"], "unknown plugin/phenomenon 'nope'; installed:"),
+        (["simulate", "--plugin", "pendulum", "--set", "length=9", "--out", "x.mp4"],
+         "length=9 is outside its bounds [0.4, 1.6] m"),
+        (["simulate", "--plugin", "pendulum", "--set", "lenght=1", "--out", "x.mp4"],
+         "unknown parameter 'lenght'; known parameters: length, damping, amplitude"),
+        (["refine", "--plugin", "pendulum", "--target", "missing.mp4"], "does not exist"),
+        (["refine", "--plugin", "pendulum", "--optimizer", "sgd"], "unknown optimizer 'sgd'; installed: ax, cma, random"),
+        (["simulate", "--plugin", "pendulum", "--effect", "gusts", "--out", "x.mp4"], "unknown effect 'gusts'"),
+    ],
+)
+def test_bad_input_gives_one_clear_line(tmp_path, args, message):
+    proc = subprocess.run([str(BIN), *args, "--json"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert message in " ".join(proc.stderr.split()), proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert message in json_out(proc)["error"]
+
+
+def test_unreadable_and_too_short_targets(tmp_path):
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(b"not a video at all")
+    proc = run_cli("refine", "--plugin", "pendulum", "--target", str(bad), "--out", str(tmp_path / "r"), check=False)
+    assert proc.returncode == 2 and "cannot decode the video" in proc.stderr
+    short = tmp_path / "short.mp4"
+    write_video(short, Clip(np.zeros((10, 64, 64, 3), np.uint8), 25.0))
+    proc = run_cli("refine", "--plugin", "pendulum", "--target", str(short), "--out", str(tmp_path / "r"), check=False)
+    assert proc.returncode == 2
+    assert "too short" in proc.stderr and "needs at least 100 frames" in " ".join(proc.stderr.split())
+    assert not (tmp_path / "r").exists(), "a refused target must leave no run directory"
+
+
+def test_env_has_no_display_dependency():
+    assert os.environ.get("PYOPENGL_PLATFORM") == "egl"

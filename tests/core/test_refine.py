@@ -1,0 +1,113 @@
+"""The refinement loop for real, on the pendulum example plugin."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.errors import UserInputError
+from physinfer.plugins import load_registry
+from physinfer.rundir import RunDirectory
+from physinfer.session import refine
+
+BIN = Path(sys.executable).parent / "physinfer"
+KEYS = {"best_params", "best_distance", "ground_truth", "abs_errors", "n_trials", "n_failed", "wall_time_s", "run_dir"}
+
+
+def cli(*args):
+    proc = subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)
+
+
+def test_refine_end_to_end_writes_every_output(tmp_path):
+    out = tmp_path / "run"
+    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--out", str(out), "--json")
+    assert KEYS <= set(data)
+    assert data["n_trials"] == 5 and data["n_failed"] == 0
+    assert set(data["abs_errors"]) == {"length", "damping", "amplitude"}
+    for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz", "run.json"):
+        assert (out / name).stat().st_size > 0, name
+    trials = RunDirectory(out).read_trials()
+    assert trials[0].x == [0.0, 0.0, 0.0], "the first trial is the centre"
+    assert json.loads((out / "result.json").read_text())["best_distance"] == data["best_distance"]
+
+
+def test_ax_recovers_the_example_truth(tmp_path):
+    """The documented tolerance of the pendulum example (docs/writing-a-plugin.md)."""
+    data = cli("refine", "--plugin", "pendulum", "--steps", "20", "--out", str(tmp_path / "ax"), "--json")
+    err = data["abs_errors"]
+    assert err["length"] < 0.05 and err["amplitude"] < 4.0 and err["damping"] < 0.06, err
+
+
+def test_killed_run_resumes_from_last_completed_trial(tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "8", "--optimizer", "random", "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    log = out / "trials.jsonl"
+    deadline = time.time() + 300
+    while time.time() < deadline:
+        if log.exists() and log.read_text().count("\n") >= 3:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before = RunDirectory(out).read_trials()
+    assert 3 <= len(before) < 8 and not (out / "result.json").exists()
+    data = cli("refine", "--plugin", "pendulum", "--steps", "8", "--optimizer", "random", "--out", str(out),
+               "--resume", "--json")
+    after = RunDirectory(out).read_trials()
+    assert data["n_trials"] == 8 and [t.step for t in after] == list(range(8))
+    assert [t.x for t in after[: len(before)]] == [t.x for t in before], "completed trials are kept as they were"
+
+
+def test_resume_refuses_other_plugin_and_corrupt_log(tmp_path):
+    registry, _ = load_registry()
+    out = tmp_path / "run"
+    refine(registry, plugin="pendulum", steps=2, optimizer="random", out=out, progress=False)
+    with pytest.raises(UserInputError, match="was run with optimizer='random', not 'cma'"):
+        refine(registry, plugin="pendulum", steps=3, optimizer="cma", out=out, resume=True, progress=False)
+    with pytest.raises(UserInputError, match="already holds a run"):
+        refine(registry, plugin="pendulum", steps=3, optimizer="random", out=out, progress=False)
+    log = out / "trials.jsonl"
+    log.write_text(log.read_text().replace('"distance"', '"distanc', 1))
+    corrupt = log.read_bytes()
+    with pytest.raises(UserInputError, match="line 1 is corrupt"):
+        refine(registry, plugin="pendulum", steps=3, optimizer="random", out=out, resume=True, progress=False)
+    assert log.read_bytes() == corrupt, "nothing is overwritten"
+
+
+def test_resume_refuses_a_run_of_another_plugin(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "run.json").write_text(json.dumps({"plugin": "flag", "optimizer": "ax", "seed": 0}))
+    (out / "trials.jsonl").write_text("")
+    registry, _ = load_registry()
+    with pytest.raises(UserInputError, match="it was run with plugin='flag', not 'pendulum'"):
+        refine(registry, plugin="pendulum", steps=2, out=out, resume=True, progress=False)
+
+
+def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
+    from pendulum_example import physics
+
+    real = physics.PendulumSimulator.simulate
+
+    def flaky(self, params, *, seed=0):
+        if params["length"] > 1.0:
+            raise physics.SimulationFailed("blew up (test)")
+        return real(self, params, seed=seed)
+
+    monkeypatch.setattr(physics.PendulumSimulator, "simulate", flaky)
+    registry, _ = load_registry()
+    result = refine(registry, plugin="pendulum", steps=6, optimizer="random", seed=3, out=tmp_path / "r", progress=False)
+    failed = [t for t in result.trials if t.status == "failed"]
+    assert failed and all("blew up" in t.error for t in failed)
+    assert result.n_failed == len(failed) and result.n_trials == 6
+    assert np.isfinite(result.best_distance)
