@@ -95,7 +95,7 @@ class ParameterSpec:
             raise UserInputError(
                 f"{self.name}={value:g} is outside its bounds [{low:g}, {high:g}]"
                 + (f" {self.unit}" if self.unit else "")
-                + f"; choose a value in that range."
+                + "; choose a value in that range."
             )
         return value
 

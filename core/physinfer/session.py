@@ -150,7 +150,13 @@ class _progress:
     def __enter__(self):  # noqa: ANN204
         if not self.enabled:
             return None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeRemainingColumn,
+        )
 
         from physinfer.cli.app import err_console
 
