@@ -1,0 +1,241 @@
+"""``physinfer dataset``: generate a phenomenon's training dataset, locally or on Dask.
+
+Mounted by the main app as ``physinfer dataset``. Heavy work is imported inside the
+command, so ``physinfer --help`` stays fast. Progress and the closing summary go to
+stderr; with ``--json`` exactly one JSON object goes to stdout.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from physinfer.errors import PhysinferError, UserInputError
+
+if TYPE_CHECKING:
+    from physinfer.datasets import DatasetPreset, GenerateResult
+
+dataset_app = typer.Typer(
+    help="Generate training datasets of simulated, rendered clips.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+@dataset_app.callback()
+def dataset_group() -> None:
+    """Generate training datasets of simulated, rendered clips (see docs/datasets.md)."""
+
+
+@dataset_app.command("generate")
+def generate_cmd(
+    plugin: Annotated[str, typer.Option("--plugin", "-p", help="Phenomenon to simulate (see `physinfer plugins`).")],
+    out: Annotated[Path, typer.Option("--out", help="Dataset directory; re-running on it resumes.")],
+    preset: Annotated[str, typer.Option("--preset", help="Size preset: cpu, paper, or the plugin's.")] = "cpu",
+    sims: Annotated[
+        str | None,
+        typer.Option("--sims", help="Simulations: a total N (split like the preset) or TRAIN,VAL,TEST."),
+    ] = None,
+    renders_per_sim: Annotated[
+        str | None, typer.Option("--renders-per-sim", help="Renders per simulation: M or TRAIN,VAL,TEST.")
+    ] = None,
+    frames: Annotated[int | None, typer.Option("--frames", help="Frames per stored clip.")] = None,
+    size: Annotated[str | None, typer.Option("--size", help="Stored clip size: N or HxW pixels.")] = None,
+    rgb: Annotated[bool, typer.Option("--rgb", help="Store RGB clips instead of grayscale.")] = False,
+    sims_per_unit: Annotated[
+        int | None, typer.Option("--sims-per-unit", help="Simulations batched per work unit (one shard).")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="Local worker processes (default: CPU count; 0: this process).")
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="Dask scheduler address; its workers must share --out.")
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Dataset seed: same seed, same data.")] = 0,
+    verify: Annotated[
+        bool, typer.Option("--verify/--no-verify", help="On resume, check every checksum (reads all data).")
+    ] = True,
+    as_json: Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")] = False,
+) -> None:
+    """Simulate, render and store a dataset with train/val/test splits; resumes an interrupted run."""
+    try:
+        result = _generate(
+            plugin=plugin,
+            out=out,
+            preset_name=preset,
+            sims=sims,
+            renders_per_sim=renders_per_sim,
+            frames=frames,
+            size=size,
+            rgb=rgb,
+            sims_per_unit=sims_per_unit,
+            workers=workers,
+            scheduler=scheduler,
+            seed=seed,
+            verify=verify,
+        )
+    except (UserInputError, PhysinferError) as exc:
+        _stderr(f"[bold red]error:[/] {exc}")
+        if as_json:
+            _emit_json({"error": str(exc)})
+        raise typer.Exit(2) from None
+    except KeyboardInterrupt:
+        _stderr("interrupted; finished units are saved: run the same command again to resume")
+        raise typer.Exit(130) from None
+    summary = result.summary()
+    _stderr(_summary_line(result))
+    if as_json:
+        _emit_json(summary)
+
+
+def _generate(
+    *,
+    plugin: str,
+    out: Path,
+    preset_name: str,
+    sims: str | None,
+    renders_per_sim: str | None,
+    frames: int | None,
+    size: str | None,
+    rgb: bool,
+    sims_per_unit: int | None,
+    workers: int | None,
+    scheduler: str | None,
+    seed: int,
+    verify: bool,
+) -> GenerateResult:
+    from physinfer.datasets import generate_dataset, generator_for, parse_split_counts
+    from physinfer.plugins import load_registry
+
+    registry, _infos = load_registry()
+    generator = generator_for(registry.phenomenon(plugin))
+    chosen = _choose_preset(generator.presets(), preset_name, plugin)
+    chosen = chosen.with_overrides(
+        sims=parse_split_counts(sims, "--sims") if sims is not None else None,
+        renders_per_sim=(
+            parse_split_counts(renders_per_sim, "--renders-per-sim") if renders_per_sim is not None else None
+        ),
+        sims_per_unit=sims_per_unit,
+        n_frames=frames,
+        size=_parse_size(size) if size is not None else None,
+        channels=3 if rgb else None,
+    )
+    where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
+    _stderr(
+        f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
+        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps "
+        f"→ {out} ({where})"
+    )
+    with _RichProgress() as progress:
+        return generate_dataset(
+            generator,
+            out,
+            preset=chosen,
+            seed=seed,
+            workers=workers,
+            scheduler=scheduler,
+            verify=verify,
+            progress=progress,
+        )
+
+
+def _choose_preset(presets: dict[str, DatasetPreset] | Any, name: str, plugin: str) -> DatasetPreset:
+    if name not in presets:
+        raise UserInputError(
+            f"unknown preset {name!r} for {plugin!r}; choose one of {', '.join(sorted(presets))}"
+        )
+    return presets[name]
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        raise UserInputError(f"--size expects N or HxW in pixels, got {text!r}") from None
+    if len(values) == 1:
+        values = values * 2
+    if len(values) != 2 or min(values) < 1:
+        raise UserInputError(f"--size expects N or HxW with positive sizes, got {text!r}")
+    return values[0], values[1]
+
+
+def _splits_text(preset: DatasetPreset) -> str:
+    from physinfer.datasets import SPLITS
+
+    return ", ".join(f"{s} {preset.sims[s]}/{preset.renders[s]}" for s in SPLITS)
+
+
+def _summary_line(result: GenerateResult) -> str:
+    units = (
+        f"units: {result.units_generated} generated ({result.units_regenerated} damaged, regenerated), "
+        f"{result.units_skipped} already complete"
+    )
+    failed = f"; {len(result.failed_sims)} simulations failed and were skipped" if result.failed_sims else ""
+    return (
+        f"[bold]{sum(result.renders.values())} renders[/] in {result.root} "
+        f"({result.bytes / 1e9:.2f} GB); wrote {result.renders_generated} in {result.seconds:.1f} s "
+        f"({result.renders_per_minute:.1f} renders/min); {units}{failed}"
+    )
+
+
+def _stderr(text: str) -> None:
+    from rich.console import Console
+
+    Console(stderr=True, highlight=False).print(text)
+
+
+def _emit_json(obj: Any) -> None:
+    from physinfer.io import to_jsonable
+
+    sys.stdout.write(json.dumps(to_jsonable(obj), allow_nan=False) + "\n")
+    sys.stdout.flush()
+
+
+class _RichProgress:
+    """A rich progress bar with ETA on stderr, fed by the engine's progress events."""
+
+    def __init__(self) -> None:
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self._progress = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+        )
+        self._task: Any = None
+
+    def __enter__(self) -> _RichProgress:
+        self._progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._progress.stop()
+
+    def start(self, phase: str, total: int, done: int = 0) -> None:
+        """Begin a phase: ``verify`` counts units, ``generate`` counts renders."""
+        label = {"verify": "checking units", "generate": "renders"}.get(phase, phase)
+        if self._task is not None:
+            self._progress.update(self._task, visible=False)
+        self._task = self._progress.add_task(label, total=total, completed=done)
+
+    def advance(self, n: int) -> None:
+        """Advance the current phase by ``n``."""
+        self._progress.advance(self._task, n)

@@ -1,0 +1,208 @@
+"""The protocol a phenomenon implements to have datasets generated: :class:`DatasetGenerator`.
+
+A generator turns seeds into data: it samples θ for a simulation, simulates a batch of
+them, samples ζ for each render and renders. The engine (:mod:`physinfer.datasets.engine`)
+owns everything else: seeding, splits, work units, executors, files and resume.
+
+Generators travel to worker processes (pickled with cloudpickle), so they must be small
+and build their heavy parts (simulator, renderer, EGL context) lazily, inside the worker;
+the worker keeps one unpickled generator per process and thread and reuses it for every
+unit it runs. :class:`PhenomenonDatasetGenerator` builds a generator from any
+:class:`~physinfer.roles.Phenomenon`; a plugin that wants other presets or a renderer
+built at the stored size subclasses it and names it in ``Phenomenon.dataset_generator``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from physinfer.datasets.presets import DEFAULT_PRESETS, ClipFormat, DatasetPreset
+from physinfer.errors import UserInputError
+from physinfer.parameters import ParameterSpace
+from physinfer.registry import resolve
+from physinfer.roles import Effect, Params, Phenomenon, Renderer, Simulator
+from physinfer.types import Clip, Trajectory
+
+
+class DatasetGenerator(ABC):
+    """Samples and produces the data of one phenomenon's dataset.
+
+    Every random choice comes from the ``rng`` or ``seeds`` the engine passes in, so a
+    dataset is a function of its seed. The engine converts whatever :meth:`render`
+    returns to the stored :class:`ClipFormat` (resampling to its fps, keeping the first
+    ``n_frames``, centre-crop and resize, grayscale); producing that format directly
+    only saves work.
+
+    Attributes:
+        phenomenon: Name of the phenomenon (recorded in the dataset).
+        parameter_space: The space θ is drawn from (recorded in the dataset).
+    """
+
+    phenomenon: str
+    parameter_space: ParameterSpace
+
+    def presets(self) -> Mapping[str, DatasetPreset]:
+        """The presets ``--preset`` chooses from; the default offers ``paper`` and ``cpu``."""
+        return dict(DEFAULT_PRESETS)
+
+    def sample_params(self, rng: np.random.Generator) -> dict[str, float]:
+        """Draw θ for one simulation; the default is uniform in the normalised cube.
+
+        Args:
+            rng: The simulation's own generator (derived from the dataset seed).
+
+        Returns:
+            Physical values by name, every one within ``parameter_space``'s bounds.
+        """
+        return self.parameter_space.sample(rng, 1)[0]
+
+    @abstractmethod
+    def simulate_batch(
+        self, params: Sequence[Params], seeds: Sequence[int], *, clip: ClipFormat
+    ) -> list[Trajectory]:
+        """Simulate ``B`` parameter sets (runs inside a worker).
+
+        Args:
+            params: ``B`` θ dicts from :meth:`sample_params`.
+            seeds: ``B`` simulation seeds.
+            clip: The stored format; simulating at least ``clip.n_frames`` frames at
+                ``clip.fps`` avoids resampling.
+
+        Returns:
+            ``B`` trajectories, ``vertices`` of shape ``(T, V, 3)``.
+
+        Raises:
+            SimulationFailed: when a simulation blows up (the engine then retries the
+                batch one simulation at a time and skips the ones that fail).
+        """
+
+    @abstractmethod
+    def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
+        """Draw ζ for one render (runs inside a worker); values must be JSON-compatible."""
+
+    @abstractmethod
+    def render(self, trajectory: Trajectory, render_params: Mapping[str, Any], *, clip: ClipFormat) -> Clip:
+        """Render one clip (runs inside a worker).
+
+        Args:
+            trajectory: One simulation.
+            render_params: ζ from :meth:`sample_render_params`.
+            clip: The stored format, as a hint for the render size.
+
+        Returns:
+            A clip ``(T, H, W, C)`` uint8.
+        """
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release renderer resources (called when a worker's generator is dropped)."""
+
+
+class PhenomenonDatasetGenerator(DatasetGenerator):
+    """The default generator of any phenomenon: its parameter space, simulator and renderer.
+
+    θ is uniform in the normalised cube, ζ comes from ``Renderer.sample_render_params``,
+    simulations run through ``Simulator.simulate_batch``. Plugins subclass it to change
+    :meth:`presets` or to build the renderer at the stored size.
+
+    Args:
+        phenomenon: The phenomenon record (pickled to workers with its factories).
+        effects: Effects switched into the simulator (none: the baseline model).
+        presets: Presets offered instead of the defaults.
+    """
+
+    def __init__(
+        self,
+        *,
+        phenomenon: Phenomenon,
+        effects: Sequence[Effect] = (),
+        presets: Mapping[str, DatasetPreset] | None = None,
+    ) -> None:
+        self.record = phenomenon
+        self.phenomenon = phenomenon.name
+        self.effects = tuple(effects)
+        self.parameter_space = phenomenon.parameter_space
+        for effect in self.effects:
+            self.parameter_space = self.parameter_space.merged(effect.parameter_space)
+        self._presets = dict(presets) if presets is not None else None
+        self._simulator: Simulator | None = None
+        self._renderer: Renderer | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        # Simulators and renderers (EGL contexts) never cross processes: rebuilt lazily.
+        state = self.__dict__.copy()
+        state["_simulator"] = None
+        state["_renderer"] = None
+        return state
+
+    def presets(self) -> Mapping[str, DatasetPreset]:
+        """The presets given at construction, else ``paper`` and ``cpu``."""
+        return dict(self._presets) if self._presets is not None else super().presets()
+
+    @property
+    def simulator(self) -> Simulator:
+        """The phenomenon's simulator, built on first use."""
+        if self._simulator is None:
+            self._simulator = self.record.make_simulator(self.effects)
+        return self._simulator
+
+    @property
+    def renderer(self) -> Renderer:
+        """The phenomenon's renderer, built on first use."""
+        if self._renderer is None:
+            self._renderer = self.record.make_renderer()
+        return self._renderer
+
+    def simulate_batch(
+        self, params: Sequence[Params], seeds: Sequence[int], *, clip: ClipFormat
+    ) -> list[Trajectory]:
+        """``Simulator.simulate_batch`` of the phenomenon (its own frame count and rate)."""
+        return self.simulator.simulate_batch(params, seeds=seeds)
+
+    def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
+        """``Renderer.sample_render_params`` of the phenomenon."""
+        return dict(self.renderer.sample_render_params(rng))
+
+    def render(self, trajectory: Trajectory, render_params: Mapping[str, Any], *, clip: ClipFormat) -> Clip:
+        """``Renderer.render`` of the phenomenon at its own size (the engine resizes)."""
+        return self.renderer.render(trajectory, render_params)
+
+    def close(self) -> None:
+        """Close the renderer if one was built."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> DatasetGenerator:
+    """The dataset generator of ``phenomenon``.
+
+    ``Phenomenon.dataset_generator`` may hold a :class:`DatasetGenerator`, a factory
+    called as ``factory(phenomenon=..., effects=...)`` (a subclass of
+    :class:`PhenomenonDatasetGenerator` is one), or a ``"module:attr"`` reference to
+    either; ``None`` gives :class:`PhenomenonDatasetGenerator`.
+
+    Raises:
+        UserInputError: when the reference cannot be imported or builds something else.
+    """
+    spec = phenomenon.dataset_generator
+    if spec is None:
+        return PhenomenonDatasetGenerator(phenomenon=phenomenon, effects=effects)
+    try:
+        obj = resolve(spec)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise UserInputError(
+            f"phenomenon {phenomenon.name!r}: cannot load its dataset generator {spec!r} "
+            f"({type(exc).__name__}: {exc})"
+        ) from None
+    if not isinstance(obj, DatasetGenerator) and callable(obj):
+        obj = obj(phenomenon=phenomenon, effects=effects)
+    if not isinstance(obj, DatasetGenerator):
+        raise UserInputError(
+            f"phenomenon {phenomenon.name!r}: dataset_generator {spec!r} gave "
+            f"{type(obj).__name__}, not a physinfer.datasets.DatasetGenerator"
+        )
+    return obj

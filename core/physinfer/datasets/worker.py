@@ -1,0 +1,249 @@
+"""What runs inside a worker process: one work unit from θ to shard (:func:`run_unit`).
+
+A job carries the generator pickled once by the engine; each process (and thread, since
+a Dask worker may run several tasks at once and EGL contexts are per thread) unpickles
+it on its first job and reuses it, so the simulator and renderer are built once per
+worker rather than once per unit. Files are written straight into the dataset directory
+(on a cluster it must be shared storage); the unit's record goes back to the engine,
+which writes it last.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import socket
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.datasets.generator import DatasetGenerator
+from physinfer.datasets.plan import SimulationPlan, UnitPlan, render_rng
+from physinfer.datasets.presets import ClipFormat
+from physinfer.datasets.storage import file_digest, npz_digest, shard_relpath, trajectory_relpath
+from physinfer.errors import PhysinferError, SimulationFailed
+from physinfer.io import atomic_path, to_jsonable
+from physinfer.types import Clip, Trajectory
+
+_THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+_local = threading.local()
+_threads_limited: list[int] = []
+
+
+@dataclass(frozen=True)
+class UnitJob:
+    """Everything a worker needs to produce one unit.
+
+    Attributes:
+        root: Dataset directory, as the worker sees it (absolute).
+        seed: Dataset seed (ζ streams are derived from it).
+        clip: Stored clip format.
+        unit: The unit's simulations.
+        generator_blob: The generator, pickled (cloudpickle) by the engine.
+        generator_key: A digest of ``generator_blob`` identifying it in the worker cache.
+        threads: Threads each worker process may use for numerical libraries; ``None``
+            leaves the process as it is (in-process runs).
+    """
+
+    root: str
+    seed: int
+    clip: ClipFormat
+    unit: UnitPlan
+    generator_blob: bytes
+    generator_key: str
+    threads: int | None = 1
+
+
+def limit_threads(n: int) -> None:
+    """Cap the threads of BLAS, OpenMP, torch and numba in this process (once per process).
+
+    One thread per worker keeps results independent of how many workers run (parallel
+    reductions sum in a thread-dependent order) and keeps ``K`` workers from
+    oversubscribing ``K`` cores. Environment variables cover libraries imported later.
+    """
+    if _threads_limited:
+        return
+    for name in _THREAD_ENV:
+        os.environ[name] = str(n)
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(n)
+    except ImportError:  # optional: env variables still cover libraries loaded later
+        pass
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(n)
+    if "numba" in sys.modules:
+        try:
+            sys.modules["numba"].set_num_threads(n)
+        except ValueError:  # numba was started with fewer threads than n
+            pass
+    _threads_limited.append(n)
+
+
+def cached_generator(blob: bytes, key: str) -> DatasetGenerator:
+    """This thread's unpickled generator for ``key`` (one kept per thread; older ones closed)."""
+    cache: dict[str, DatasetGenerator] = getattr(_local, "generators", {})
+    if key not in cache:
+        for old in cache.values():
+            old.close()
+        cache = {key: pickle.loads(blob)}
+        _local.generators = cache
+    return cache[key]
+
+
+def run_unit(job: UnitJob) -> dict[str, Any]:
+    """Simulate, render and write one unit; returns its record (JSON-ready).
+
+    Simulations that fail (raise :class:`SimulationFailed` or produce NaN) are listed
+    under ``"failed"`` and get no renders; the rest of the unit is kept.
+    """
+    if job.threads is not None:
+        limit_threads(job.threads)
+    generator = cached_generator(job.generator_blob, job.generator_key)
+    root = Path(job.root)
+    t0 = time.perf_counter()
+    trajectories, failed = simulate_unit(generator, job.unit.sims, job.clip)
+    t1 = time.perf_counter()
+    traj_entries = [
+        save_trajectory(root, sim, traj) for sim, traj in zip(job.unit.sims, trajectories, strict=True) if traj is not None
+    ]
+    kept = [(sim, traj) for sim, traj in zip(job.unit.sims, trajectories, strict=True) if traj is not None]
+    shard_file = shard_relpath(job.unit.unit)
+    n_clips = sum(sim.n_renders for sim, _ in kept)
+    rows: list[dict[str, Any]] = []
+    render_s = 0.0
+    with atomic_path(root / shard_file, suffix=".npy") as tmp:
+        if n_clips == 0:
+            np.save(tmp, np.zeros((0, *job.clip.shape), dtype=np.uint8))
+        else:
+            shard = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.uint8, shape=(n_clips, *job.clip.shape))
+            index = 0
+            for sim, traj in kept:
+                for r in range(sim.n_renders):
+                    zeta = generator.sample_render_params(render_rng(job.seed, sim.split, sim.local, r))
+                    t_r = time.perf_counter()
+                    shard[index] = to_stored(generator.render(traj, zeta, clip=job.clip), job.clip)
+                    render_s += time.perf_counter() - t_r
+                    rows.append(_row(sim, r, zeta, shard_file, index))
+                    index += 1
+            shard.flush()
+            del shard
+    shard_path = root / shard_file
+    checksum = file_digest(shard_path)
+    for row in rows:
+        row["checksum"] = checksum
+    return {
+        "unit": job.unit.unit,
+        "split": job.unit.split,
+        "sims": [sim.sim for sim in job.unit.sims],
+        "failed": failed,
+        "shard": {
+            "file": shard_file,
+            "bytes": shard_path.stat().st_size,
+            "checksum": checksum,
+            "shape": [n_clips, *job.clip.shape],
+        },
+        "trajectories": traj_entries,
+        "rows": rows,
+        "timing": {
+            "simulate_s": t1 - t0,
+            "render_s": render_s,
+            "total_s": time.perf_counter() - t0,
+            "worker": f"{socket.gethostname()}:{os.getpid()}",
+        },
+    }
+
+
+def simulate_unit(
+    generator: DatasetGenerator, sims: Sequence[SimulationPlan], clip: ClipFormat
+) -> tuple[list[Trajectory | None], list[dict[str, Any]]]:
+    """Simulate a unit's batch; on failure, one simulation at a time to find the culprits.
+
+    Returns:
+        One trajectory per simulation (``None`` where it failed) and the failures as
+        ``{"sim": id, "error": message}``.
+    """
+    params, seeds = [s.params for s in sims], [s.seed for s in sims]
+    try:
+        batch: list[Trajectory | None] = list(generator.simulate_batch(params, seeds, clip=clip))
+    except SimulationFailed:
+        batch = [_simulate_one(generator, s, clip) for s in sims]
+    if len(batch) != len(sims):
+        raise PhysinferError(
+            f"{type(generator).__name__}.simulate_batch returned {len(batch)} trajectories for {len(sims)} simulations"
+        )
+    failed: list[dict[str, Any]] = []
+    for i, (sim, traj) in enumerate(zip(sims, batch, strict=True)):
+        if traj is None or not traj.is_finite():
+            batch[i] = None
+            failed.append({"sim": sim.sim, "params": sim.params, "error": "simulation failed or produced NaN"})
+    return batch, failed
+
+
+def _simulate_one(generator: DatasetGenerator, sim: SimulationPlan, clip: ClipFormat) -> Trajectory | None:
+    try:
+        return generator.simulate_batch([sim.params], [sim.seed], clip=clip)[0]
+    except SimulationFailed:
+        return None
+
+
+def save_trajectory(root: Path, sim: SimulationPlan, trajectory: Trajectory) -> dict[str, Any]:
+    """Write one trajectory (atomically) and return its entry ``{"sim", "file", "checksum"}``."""
+    rel = trajectory_relpath(sim.sim)
+    trajectory.save(root / rel)
+    return {"sim": sim.sim, "file": rel, "checksum": npz_digest(root / rel)}
+
+
+def to_stored(clip: Clip, fmt: ClipFormat) -> np.ndarray:
+    """Convert a rendered clip to the stored format.
+
+    Resamples to ``fmt.fps`` (nearest frame), keeps the first ``fmt.n_frames`` frames,
+    converts colour and centre-crops and resizes to ``(fmt.height, fmt.width)``.
+
+    Args:
+        clip: Rendered clip ``(T', H', W', C)`` uint8.
+        fmt: The stored format.
+
+    Returns:
+        ``fmt.shape`` uint8: ``(T, H, W)`` or ``(T, H, W, 3)``.
+
+    Raises:
+        PhysinferError: when the clip is too short for ``fmt.n_frames``.
+    """
+    from physinfer.video import center_crop_resize, resample, to_gray
+
+    resampled = resample(clip, fmt.fps)
+    if resampled.n_frames < fmt.n_frames:
+        raise PhysinferError(
+            f"rendered clips have {clip.n_frames} frames at {clip.fps:g} fps "
+            f"({resampled.n_frames} at {fmt.fps:g} fps); the dataset stores {fmt.n_frames}: "
+            "choose fewer frames or make the phenomenon simulate longer"
+        )
+    frames = resampled.frames[: fmt.n_frames]
+    if fmt.channels == 1:
+        frames = frames[..., 0] if frames.shape[-1] == 1 else np.rint(to_gray(frames) * 255.0).astype(np.uint8)
+    elif frames.shape[-1] == 1:
+        frames = np.repeat(frames, 3, axis=-1)
+    return center_crop_resize(frames, (fmt.height, fmt.width))
+
+
+def _row(sim: SimulationPlan, render: int, zeta: dict[str, Any], shard_file: str, index: int) -> dict[str, Any]:
+    return {
+        "render": sim.first_render + render,
+        "sim": sim.sim,
+        "split": sim.split,
+        "render_index": render,
+        "params": dict(sim.params),
+        "render_params": to_jsonable(zeta),
+        "sim_seed": sim.seed,
+        "file": shard_file,
+        "index": index,
+        "trajectory": trajectory_relpath(sim.sim),
+    }
