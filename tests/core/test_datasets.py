@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import socket
 import types
 from pathlib import Path
@@ -208,6 +209,7 @@ def test_splits_bounds_and_loader(reference):
     traj = ds.trajectory(int(ds.sim_ids[0]))
     assert traj.vertices.shape == (16, 30, 3)
     assert len(ClipDataset(reference, None)) == 19
+    assert np.array_equal(pickle.loads(pickle.dumps(ds))[4], ds[4])  # DataLoader workers reopen maps
     with pytest.raises(UserInputError, match="unknown split"):
         ClipDataset(reference, "training")
 
@@ -285,9 +287,11 @@ def test_corrupted_and_truncated_shards_are_regenerated(reference, tmp_path):
     truncated = root / "shards" / "unit-00003.npy"
     truncated.write_bytes(truncated.read_bytes()[:-100])
     (root / "trajectories" / "sim-000008.npz").unlink()
+    (root / "units" / "unit-00000.json").write_text('{"unit": 0, "sims": [0, 1], "shard"')
 
     quick = generate_dataset(gen, root, preset=TINY, seed=7, workers=0, verify=False)
-    assert (quick.units_regenerated, quick.units_generated) == (2, 2)  # truncation and loss, by size
+    # Truncation, a lost file and a torn record are found without reading the data.
+    assert (quick.units_regenerated, quick.units_generated) == (3, 3)
     full = generate_dataset(gen, root, preset=TINY, seed=7, workers=0)
     assert (full.units_regenerated, full.units_generated) == (1, 1)  # the flipped byte, by checksum
     assert snapshot(root) == snapshot(reference)

@@ -371,22 +371,28 @@ def _resume_state(
         progress.start("verify", len(recorded))
     for unit in units:
         record = read_json(unit_record_path(root, unit.unit)) if unit.unit in recorded else None
-        if record is None:
-            if unit.unit in recorded:  # the record itself is unreadable
-                unit_record_path(root, unit.unit).unlink(missing_ok=True)
-                regenerated += 1
+        if unit.unit not in recorded:
             todo.append(unit)
             continue
-        intact = record.get("sims") == [s.sim for s in unit.sims] and not unit_problems(root, record, verify=verify)
-        if intact:
+        if _intact(root, unit, record, verify=verify):
             records[unit.unit] = record
         else:
-            remove_unit_files(root, record)
+            if isinstance(record, dict) and "shard" in record:
+                remove_unit_files(root, record)
+            unit_record_path(root, unit.unit).unlink(missing_ok=True)
             regenerated += 1
             todo.append(unit)
         if progress is not None:
             progress.advance(1)
     return records, todo, regenerated
+
+
+def _intact(root: Path, unit: UnitPlan, record: Any, *, verify: bool) -> bool:
+    """Whether a unit's record is readable, belongs to this plan and its files are intact."""
+    try:
+        return record["sims"] == [s.sim for s in unit.sims] and not unit_problems(root, record, verify=verify)
+    except (TypeError, KeyError):  # an unreadable or foreign record
+        return False
 
 
 def _run_units(

@@ -31,7 +31,7 @@ from physinfer.errors import PhysinferError, SimulationFailed
 from physinfer.io import atomic_path, to_jsonable
 from physinfer.types import Clip, Trajectory
 
-_THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+_THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS", "LP_NUM_THREADS")
 _local = threading.local()
 _threads_limited: list[int] = []
 
@@ -61,11 +61,13 @@ class UnitJob:
 
 
 def limit_threads(n: int) -> None:
-    """Cap the threads of BLAS, OpenMP, torch and numba in this process (once per process).
+    """Cap the threads of BLAS, OpenMP, torch, numba and llvmpipe in this process (once).
 
     One thread per worker keeps results independent of how many workers run (parallel
     reductions sum in a thread-dependent order) and keeps ``K`` workers from
-    oversubscribing ``K`` cores. Environment variables cover libraries imported later.
+    oversubscribing ``K`` cores; Mesa's llvmpipe (``LP_NUM_THREADS``) would otherwise
+    start a rasteriser thread per core in every worker. Environment variables cover
+    libraries loaded later (the renderer's EGL context is created after this).
     """
     if _threads_limited:
         return
