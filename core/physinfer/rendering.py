@@ -19,7 +19,11 @@ def use_headless_gl() -> None:
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+_Z_UP = np.array([0.0, 0.0, 1.0])
+_Z_UP.setflags(write=False)
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = _Z_UP) -> np.ndarray:
     """Camera pose (4, 4) for pyrender (camera looks down its -z axis) at ``eye`` towards ``target``."""
     eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
     forward = target - eye
@@ -55,14 +59,68 @@ class OffscreenContext:
         self.width, self.height = width, height
         self._renderer: Any = None
 
-    def render(self, scene: Any) -> np.ndarray:
-        """Render ``scene``; returns ``(H, W, 3)`` uint8 RGB."""
+    _open = 0
+    """Contexts created and not yet closed, across the process (see :meth:`close`)."""
+
+    def render(self, scene: Any, *, rgba: bool = False) -> np.ndarray:
+        """Render ``scene``.
+
+        Args:
+            scene: A ``pyrender.Scene``.
+            rgba: Also return coverage as alpha (clear the scene with ``bg_color`` alpha
+                0): anti-aliased edges then come out premultiplied, ready to composite
+                over a background image.
+
+        Returns:
+            ``(H, W, 3)`` uint8 RGB, or ``(H, W, 4)`` uint8 RGBA when ``rgba``.
+        """
+        self._ensure_renderer()
+        if rgba:
+            import pyrender
+
+            color, _depth = self._renderer.render(scene, flags=pyrender.RenderFlags.RGBA)
+            return np.ascontiguousarray(color)
+        color, _depth = self._renderer.render(scene)
+        return np.ascontiguousarray(color[..., :3])
+
+    def update_vertices(self, primitive: Any, positions: np.ndarray, normals: np.ndarray | None = None) -> None:
+        """Move the vertices of a ``pyrender.Primitive`` that is already in a scene.
+
+        pyrender 0.1.45 uploads a primitive's vertex buffer once, when the primitive is
+        first rendered; its ``positions``/``normals`` setters change only the CPU copy. This
+        sets them and re-uploads the interleaved vertex data into the same GL buffer, so a
+        deforming mesh is animated without rebuilding the scene or its GL objects.
+
+        Args:
+            primitive: The primitive to update (same vertex count as before).
+            positions: ``(N, 3)`` float vertex positions.
+            normals: ``(N, 3)`` vertex normals, or None to keep the current ones.
+        """
+        primitive.positions = positions
+        if normals is not None:
+            primitive.normals = normals
+        if self._renderer is None or not primitive._in_context():
+            return  # first render uploads everything
+        from OpenGL import GL
+
+        data = _interleaved_vertex_data(primitive)
+        platform = self._renderer._platform
+        platform.make_current()
+        try:
+            GL.glBindBuffer(GL.GL_ARRAY_BUFFER, primitive._buffers[0])
+            GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
+            GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
+        finally:
+            platform.make_uncurrent()
+
+    def _ensure_renderer(self) -> None:
         if self._renderer is None:
             use_headless_gl()
             import pyrender
 
             try:
                 self._renderer = pyrender.OffscreenRenderer(self.width, self.height)
+                OffscreenContext._open += 1
             except Exception as exc:
                 from physinfer.errors import PhysinferError
 
@@ -71,17 +129,55 @@ class OffscreenContext:
                     "Install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri) "
                     "and keep PYOPENGL_PLATFORM=egl."
                 ) from None
-        color, _depth = self._renderer.render(scene)
-        return np.ascontiguousarray(color[..., :3])
 
     def close(self) -> None:
-        """Release the EGL context."""
-        if self._renderer is not None:
-            self._renderer.delete()
-            self._renderer = None
+        """Release the EGL context (other contexts of the process stay usable)."""
+        if self._renderer is None:
+            return
+        renderer, self._renderer = self._renderer, None
+        OffscreenContext._open -= 1
+        platform = renderer._platform
+        if OffscreenContext._open > 0 and getattr(platform, "_egl_context", None) is not None:
+            _release_egl_context_only(renderer)
+        else:
+            renderer.delete()
 
     def __del__(self) -> None:  # pragma: no cover - best effort at interpreter exit
         try:
             self.close()
         except Exception:
             pass
+
+
+def _release_egl_context_only(renderer: Any) -> None:
+    """Free an ``OffscreenRenderer``'s GL objects and EGL context, keeping the EGL display.
+
+    pyrender's ``OffscreenRenderer.delete`` ends with ``eglTerminate`` on the display,
+    which every EGL context of the process shares: it would invalidate the contexts of
+    all other open renderers (``eglMakeCurrent`` then fails with EGL_BAD_DISPLAY).
+    """
+    from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+
+    platform = renderer._platform
+    platform.make_current()
+    renderer._renderer.delete()
+    eglMakeCurrent(platform._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+    eglDestroyContext(platform._egl_display, platform._egl_context)
+    platform._egl_context = None
+    platform._egl_display = None
+    renderer._renderer = None
+    renderer._platform = None
+
+
+def _interleaved_vertex_data(primitive: Any) -> np.ndarray:
+    """The vertex buffer contents of a primitive, laid out as pyrender 0.1.45 lays them out.
+
+    One row per vertex: position, then normal, tangent, texcoord_0, texcoord_1, color_0 for
+    those the primitive has (see ``pyrender.Primitive._add_to_context``).
+    """
+    columns = [primitive.positions]
+    for attribute in ("normals", "tangents", "texcoord_0", "texcoord_1", "color_0"):
+        value = getattr(primitive, attribute)
+        if value is not None:
+            columns.append(value)
+    return np.ascontiguousarray(np.hstack(columns), dtype=np.float32)

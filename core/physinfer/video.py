@@ -106,7 +106,16 @@ def _read_gif(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], flo
     except Exception as exc:
         raise UserInputError(f"{path}: cannot read the gif ({type(exc).__name__}: {exc})") from None
     known = [d for d in durations if d]
-    return frames, (1000.0 / float(np.median(known))) if known else None
+    if not known:
+        return frames, None
+    # GIF writers (Pillow included) merge identical consecutive frames into one frame
+    # shown for several frame times; repeat such frames so frame times stay uniform.
+    base = float(min(known))
+    repeats = [max(1, int(round(d / base))) if d else 1 for d in durations]
+    frames = [frame for frame, n in zip(frames, repeats, strict=True) for _ in range(n)]
+    if max_frames is not None:
+        frames = frames[:max_frames]
+    return frames, 1000.0 / base
 
 
 def _read_image_folder(path: Path, max_frames: int | None) -> list[np.ndarray]:
