@@ -23,3 +23,12 @@ def physinfer_register_embedders(registry: Registry) -> None:
         "physinfer.embedders:GridSpectrumEmbedder",
         "parameter-free: pixel spectra pooled over a grid (any phenomenon)",
     )
+
+
+@hookimpl
+def physinfer_register_commands(registry: Registry) -> None:
+    registry.add_command(
+        "dataset",
+        "physinfer.cli.dataset_cmd:dataset_app",
+        "Generate training datasets of simulated, rendered clips.",
+    )
