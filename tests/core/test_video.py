@@ -1,0 +1,212 @@
+"""Tests of :mod:`physinfer.video`: reading, writing, resampling, preprocessing, and bad input."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from physinfer.errors import UserInputError
+from physinfer.types import Clip
+from physinfer.video import (
+    center_crop_resize,
+    prepare_for_embedding,
+    read_video,
+    resample,
+    side_by_side,
+    to_gray,
+    write_video,
+)
+
+
+def moving_pattern(n_frames: int = 12, height: int = 48, width: int = 64) -> np.ndarray:
+    """``(T, H, W, 3)`` uint8: smooth colour gradients and a bright square moving right."""
+    yy, xx = np.mgrid[0:height, 0:width]
+    frames = np.empty((n_frames, height, width, 3), dtype=np.uint8)
+    for t in range(n_frames):
+        frames[t, ..., 0] = (xx * 255 // width).astype(np.uint8)
+        frames[t, ..., 1] = (yy * 255 // height).astype(np.uint8)
+        frames[t, ..., 2] = 60
+        x0 = 4 + 3 * t
+        frames[t, 16:32, x0 : x0 + 12] = 230
+    return frames
+
+
+def test_mp4_round_trip_keeps_frames_within_codec_tolerance(tmp_path: Path) -> None:
+    frames = moving_pattern()
+    path = write_video(tmp_path / "clip.mp4", frames, fps=25.0)
+    clip = read_video(path)
+    assert clip.frames.shape == frames.shape
+    assert clip.fps == pytest.approx(25.0)
+    error = np.abs(clip.frames.astype(int) - frames)
+    assert error.mean() < 3.0, f"mean error {error.mean():.2f}"
+    assert np.percentile(error, 99) < 25
+    # The moving square is where it was in every frame.
+    for t in range(len(frames)):
+        x0 = 4 + 3 * t
+        assert clip.frames[t, 20:28, x0 + 2 : x0 + 10].min() > 200
+
+
+def test_clip_object_and_odd_frame_size_can_be_written(tmp_path: Path) -> None:
+    frames = moving_pattern(n_frames=5, height=33, width=45)
+    write_video(tmp_path / "odd.mp4", Clip(frames, 30.0))
+    clip = read_video(tmp_path / "odd.mp4")
+    assert clip.fps == pytest.approx(30.0) and clip.n_frames == 5
+    # H.264 needs even sizes: one edge row/column is repeated.
+    assert clip.size == (34, 46)
+    assert np.abs(clip.frames[:, :33, :45].astype(int) - frames).mean() < 6.0  # 4:2:0 chroma on a tiny frame
+
+
+def test_gif_round_trip(tmp_path: Path) -> None:
+    frames = moving_pattern(n_frames=6)
+    write_video(tmp_path / "clip.gif", frames, fps=25.0)
+    clip = read_video(tmp_path / "clip.gif")
+    assert clip.fps == pytest.approx(25.0)
+    assert clip.frames.shape == frames.shape
+    assert np.abs(clip.frames.astype(int) - frames).mean() < 8.0  # 256-colour palette
+
+
+def test_gif_with_repeated_frames_keeps_its_timing(tmp_path: Path) -> None:
+    # GIF writers merge identical consecutive frames into one longer frame; reading must
+    # undo that, or the frames after a pause would come too early.
+    frames = np.zeros((5, 16, 16, 3), dtype=np.uint8)
+    frames[1:3] = 255
+    frames[4] = 128
+    write_video(tmp_path / "pause.gif", frames, fps=25.0)
+    clip = read_video(tmp_path / "pause.gif")
+    assert clip.fps == pytest.approx(25.0)
+    np.testing.assert_array_equal(clip.frames[:, 8, 8, 0], [0, 255, 255, 0, 128])
+
+
+def test_avi_and_mov_are_read(tmp_path: Path) -> None:
+    import av
+
+    frames = moving_pattern(n_frames=8)
+    path = tmp_path / "clip.avi"
+    with av.open(str(path), mode="w") as container:
+        stream = container.add_stream("mpeg4", rate=Fraction(30))
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        for frame in frames:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    clip = read_video(path)
+    assert clip.n_frames == 8 and clip.fps == pytest.approx(30.0) and clip.size == (48, 64)
+    write_video(tmp_path / "clip.mov", frames, fps=24.0)
+    assert read_video(tmp_path / "clip.mov").fps == pytest.approx(24.0)
+
+
+def test_max_frames_and_fps_override(tmp_path: Path) -> None:
+    write_video(tmp_path / "clip.mp4", moving_pattern(), fps=25.0)
+    clip = read_video(tmp_path / "clip.mp4", fps=50.0, max_frames=4)
+    assert clip.n_frames == 4 and clip.fps == 50.0
+
+
+def test_image_folder_needs_fps(tmp_path: Path) -> None:
+    frames = moving_pattern(n_frames=4)
+    for t, frame in enumerate(frames):
+        Image.fromarray(frame[..., 0]).save(tmp_path / f"frame_{t:03d}.png")  # grayscale images
+    (tmp_path / "readme.txt").write_text("not a frame")
+    with pytest.raises(UserInputError, match="--fps"):
+        read_video(tmp_path)
+    clip = read_video(tmp_path, fps=10.0)
+    assert clip.frames.shape == (4, 48, 64, 3) and clip.fps == 10.0
+    np.testing.assert_array_equal(clip.frames[2, ..., 1], frames[2, ..., 0])
+
+
+def test_missing_file_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(UserInputError, match="does not exist"):
+        read_video(tmp_path / "nope.mp4")
+
+
+def test_unreadable_file_is_refused(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.mp4"
+    broken.write_bytes(b"\x00\x01 this is not a video " * 50)
+    with pytest.raises(UserInputError, match="cannot decode"):
+        read_video(broken)
+    empty = tmp_path / "empty.mov"
+    empty.write_bytes(b"")
+    with pytest.raises(UserInputError, match=r"empty\.mov"):
+        read_video(empty)
+    bad_gif = tmp_path / "bad.gif"
+    bad_gif.write_bytes(b"GIF89a garbage")
+    with pytest.raises(UserInputError, match="cannot read the gif"):
+        read_video(bad_gif)
+
+
+def test_unsupported_format_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "notes.txt"
+    path.write_text("hello")
+    with pytest.raises(UserInputError, match="unsupported video format '.txt'"):
+        read_video(path)
+    with pytest.raises(UserInputError, match="write .mp4 or .gif"):
+        write_video(tmp_path / "out.txt", moving_pattern(n_frames=2), fps=25.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"], "no temporary file left behind"
+
+
+def test_empty_folder_and_mismatched_images_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(UserInputError, match="holds no images"):
+        read_video(tmp_path, fps=25.0)
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "a.png")
+    Image.fromarray(np.zeros((8, 9, 3), np.uint8)).save(tmp_path / "b.png")
+    with pytest.raises(UserInputError, match="differ in size"):
+        read_video(tmp_path, fps=25.0)
+
+
+def test_too_short_clip_is_refused() -> None:
+    clip = Clip(moving_pattern(n_frames=10), 25.0)
+    with pytest.raises(UserInputError, match="too short.*at least 30 frames"):
+        prepare_for_embedding(clip, fps=25.0, n_frames=30, size=32)
+
+
+def test_resampling_30_to_25_fps_keeps_the_duration() -> None:
+    frames = np.arange(60, dtype=np.uint8)[:, None, None, None] * np.ones((1, 4, 4, 3), np.uint8)
+    clip = Clip(frames, 30.0)
+    out = resample(clip, 25.0)
+    assert out.fps == 25.0 and out.n_frames == 50
+    assert out.duration == pytest.approx(clip.duration)
+    # Output frame k shows the input frame nearest to time k / 25 s.
+    expected = np.clip(np.round(np.arange(50) / 25.0 * 30.0), 0, 59).astype(np.uint8)
+    np.testing.assert_array_equal(out.frames[:, 0, 0, 0], expected)
+    up = resample(Clip(frames[:50], 25.0), 30.0)
+    assert up.n_frames == 60 and up.duration == pytest.approx(2.0)
+    assert resample(clip, 30.0) is clip
+
+
+def test_to_gray_uses_luma_weights() -> None:
+    frames = np.zeros((1, 1, 3, 3), dtype=np.uint8)
+    frames[0, 0, 0] = (255, 0, 0)
+    frames[0, 0, 1] = (0, 255, 0)
+    frames[0, 0, 2] = (255, 255, 255)
+    gray = to_gray(frames)
+    assert gray.shape == (1, 1, 3) and gray.dtype == np.float32
+    np.testing.assert_allclose(gray[0, 0], [0.299, 0.587, 1.0], atol=1e-6)
+
+
+def test_center_crop_resize_keeps_the_centre() -> None:
+    frames = np.zeros((2, 40, 120, 3), dtype=np.uint8)
+    frames[:, :, 40:80] = 255  # only the centre square is white
+    out = center_crop_resize(frames, 20)
+    assert out.shape == (2, 20, 20, 3) and out.dtype == np.uint8
+    assert out.min() == 255
+    gray = center_crop_resize(to_gray(frames), (10, 30))
+    assert gray.shape == (2, 10, 30) and gray.dtype == np.float32
+
+
+def test_prepare_for_embedding_shape_and_range() -> None:
+    clip = Clip(moving_pattern(n_frames=36, height=60, width=80), 30.0)
+    x = prepare_for_embedding(clip, fps=25.0, n_frames=30, size=32)
+    assert x.shape == (30, 32, 32) and x.dtype == np.float32
+    assert 0.0 <= x.min() and x.max() <= 1.0
+
+
+def test_side_by_side_cuts_to_the_shortest_clip() -> None:
+    a = Clip(moving_pattern(n_frames=10, height=48, width=64), 25.0)
+    b = Clip(moving_pattern(n_frames=12, height=96, width=96), 30.0)
+    out = side_by_side([a, b], height=32)
+    assert out.fps == 25.0 and out.n_frames == 10
+    assert out.size == (32, 43 + 32)
