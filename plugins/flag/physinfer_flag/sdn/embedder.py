@@ -1,0 +1,188 @@
+"""The flag plugin's embedders: the trained SDN and the parameter-free spectral one.
+
+Both prepare a clip the same way (resample to ``fps``, first ``n_frames`` frames,
+grayscale, centre crop, resize to ``size``; :func:`physinfer.video.prepare_for_embedding`)
+and run the SDN's fixed front end. :class:`SDNEmbedder` then applies the trained head
+(weights from a safetensors file, by default the one shipped with the plugin);
+:class:`SpectralEmbedder` pools the spectral maps over a grid and needs no weights,
+as a baseline and a fallback.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from physinfer.errors import UserInputError
+from physinfer.roles import Embedder
+from physinfer.types import Clip
+from physinfer_flag.sdn.baselines import SpectralPooling
+from physinfer_flag.sdn.frontend import FrontEndConfig, SpectralFrontEnd, prepare_video
+from physinfer_flag.sdn.network import SDN
+from physinfer_flag.sdn.settings import resolve_device
+from physinfer_flag.sdn.weights import DEFAULT_WEIGHTS, load_sdn
+
+
+def _prepared_batch(
+    clips: Sequence[Clip], config: FrontEndConfig, device: torch.device
+) -> torch.Tensor:
+    videos = np.stack([prepare_video(c, config) for c in clips])  # (B, T, size, size) float32
+    return torch.from_numpy(videos).to(device)
+
+
+class SDNEmbedder(Embedder):
+    """Clip → SDN embedding ``(D_e,)``.
+
+    Args:
+        model: Weights file or training output directory, an :class:`SDN` in memory, or
+            ``None`` for the weights shipped with the plugin
+            (``physinfer_flag/data/sdn_default.safetensors``).
+        device: Torch device (default: cuda if available, else cpu).
+        batch_size: Clips per forward pass in :meth:`embed_many`.
+
+    Attributes:
+        fps: Frame rate clips are resampled to (from the weights' configuration).
+        n_frames: Frames consumed.
+        size: Side of the square grayscale input.
+        dim: ``D_e``.
+
+    Raises:
+        UserInputError: when no weights are given and none are shipped, or the file is
+            not SDN weights.
+    """
+
+    def __init__(
+        self,
+        *,
+        model: str | Path | SDN | None = None,
+        device: str | None = None,
+        batch_size: int = 8,
+    ) -> None:
+        self.device = resolve_device(device)
+        if isinstance(model, SDN):
+            self.network = model.to(self.device).eval()
+        else:
+            if model is None:
+                if not DEFAULT_WEIGHTS.is_file():
+                    raise UserInputError(
+                        f"the flag plugin's default SDN weights are missing ({DEFAULT_WEIGHTS}); "
+                        "run `make pretrained` to generate and train them, pass --model PATH to "
+                        "weights from `physinfer train`, or choose --embedder spectral"
+                    )
+                model = DEFAULT_WEIGHTS
+            self.network = load_sdn(model, self.device)
+        if batch_size < 1:
+            raise UserInputError(f"batch_size must be positive, got {batch_size}")
+        self.batch_size = batch_size
+        c = self.network.config.frontend
+        self.fps, self.n_frames, self.size = float(c.fps), int(c.n_frames), int(c.size)
+        self.dim = int(self.network.config.embedding_dim)
+
+    def embed(self, clip: Clip) -> np.ndarray:
+        """Embed one clip; returns ``(D_e,)`` float32.
+
+        Raises:
+            UserInputError: when the clip is shorter than ``n_frames`` at ``fps``.
+        """
+        return self.embed_many([clip])[0]
+
+    @torch.inference_mode()
+    def embed_many(self, clips: Sequence[Clip]) -> np.ndarray:
+        """Embed several clips; returns ``(N, D_e)`` float32."""
+        out = np.empty((len(clips), self.dim), dtype=np.float32)
+        for start in range(0, len(clips), self.batch_size):
+            batch = _prepared_batch(
+                clips[start : start + self.batch_size], self.network.config.frontend, self.device
+            )
+            out[start : start + len(batch)] = self.network(batch).float().cpu().numpy()
+        return out
+
+
+@dataclass(frozen=True)
+class SpectralEmbedderConfig:
+    """Settings of :class:`SpectralEmbedder`.
+
+    Attributes:
+        frontend: The fixed front end (the SDN's defaults).
+        grid: Cells per side of the spatial pooling grid.
+        power_floor: Added to mean powers before the log.
+    """
+
+    frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
+    grid: int = 7
+    power_floor: float = 1e-6
+
+    def validate(self) -> None:
+        """Raise :class:`ValueError` on inconsistent settings."""
+        self.frontend.validate()
+        if self.grid < 1 or self.grid > self.frontend.out_size:
+            raise ValueError(
+                f"grid must be between 1 and {self.frontend.out_size}, got {self.grid}"
+            )
+        if self.power_floor <= 0:
+            raise ValueError("power_floor must be positive")
+
+
+class SpectralEmbedder(Embedder):
+    """Clip → pooled spectral maps, no learned weights (baseline and fallback).
+
+    The SDN front end (temporal Gaussian, derivative filters, max-pool, peak power and
+    frequency per pixel), then per grid cell and channel the log mean peak power and the
+    power-weighted mean peak frequency: ``(4k · grid²,)``, 196 values by default.
+
+    Args:
+        config: Settings.
+        model: Must be ``None`` (accepted for the uniform embedder factory signature).
+        device: Torch device (default: cuda if available, else cpu).
+
+    Raises:
+        UserInputError: when a model is given.
+    """
+
+    def __init__(
+        self,
+        *,
+        config: SpectralEmbedderConfig | None = None,
+        model: str | Path | None = None,
+        device: str | None = None,
+    ) -> None:
+        if model is not None:
+            raise UserInputError(
+                "the spectral embedder has no weights; drop --model or choose --embedder sdn"
+            )
+        self.config = config or SpectralEmbedderConfig()
+        try:
+            self.config.validate()
+        except ValueError as exc:
+            raise UserInputError(f"invalid spectral embedder settings: {exc}") from None
+        self.device = resolve_device(device)
+        c = self.config.frontend
+        self.fps, self.n_frames, self.size = float(c.fps), int(c.n_frames), int(c.size)
+        self.frontend = SpectralFrontEnd(config=c).to(self.device)
+        self.pooling = SpectralPooling(
+            frontend=c, grid=self.config.grid, power_floor=self.config.power_floor
+        )
+        self.dim = self.pooling.out_dim
+
+    def embed(self, clip: Clip) -> np.ndarray:
+        """Embed one clip; returns ``(4k · grid²,)`` float32.
+
+        Raises:
+            UserInputError: when the clip is shorter than ``n_frames`` at ``fps``.
+        """
+        return self.embed_many([clip])[0]
+
+    @torch.inference_mode()
+    def embed_many(self, clips: Sequence[Clip]) -> np.ndarray:
+        """Embed several clips; returns ``(N, 4k · grid²)`` float32."""
+        out = np.empty((len(clips), self.dim), dtype=np.float32)
+        for start in range(0, len(clips), 8):
+            batch = _prepared_batch(clips[start : start + 8], self.config.frontend, self.device)
+            out[start : start + len(batch)] = (
+                self.pooling(self.frontend(batch)).float().cpu().numpy()
+            )
+        return out
