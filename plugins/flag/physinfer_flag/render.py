@@ -165,6 +165,14 @@ def _check_range(key: str, value: float, low: float, high: float) -> None:
         raise UserInputError(f"{key}={value:g} is out of range; choose a value in [{low:g}, {high:g}]")
 
 
+def _whole(value: Any) -> int:
+    """An int from an int-valued number or string (the CLI passes numbers as floats)."""
+    number = float(value)
+    if not number.is_integer():
+        raise ValueError(f"{value!r} is not a whole number of pixels")
+    return int(number)
+
+
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -173,12 +181,14 @@ def _coerce(key: str, value: Any) -> Any:
     """Convert a ζ value (maybe a string from the command line, or JSON) to its field's type."""
     try:
         if key == "image_size":
-            if isinstance(value, (int, np.integer)) or isinstance(value, str) and "," not in value:
-                return int(value)
-            parts = value.split(",") if isinstance(value, str) else list(value)
+            if isinstance(value, str):
+                value = value.split(",") if "," in value else float(value)
+            if isinstance(value, (int, float, np.number)):
+                return _whole(value)
+            parts = list(value)
             if len(parts) != 2:
                 raise ValueError("expected one int or two (H, W)")
-            return int(parts[0]), int(parts[1])
+            return _whole(parts[0]), _whole(parts[1])
         if key == "camera_distance":
             if value is None or isinstance(value, str) and value.lower() in {"none", "auto", ""}:
                 return None

@@ -188,6 +188,7 @@ def test_camera_more_than_15_degrees_off_the_wind_is_refused(renderer: FlagRende
         ({"texture": "atlantis"}, "texture"),
         ({"background": "/no/such/image.png"}, "background"),
         ({"image_size": 4}, "image_size"),
+        ({"image_size": [1, 2, 3]}, "image_size"),
         ({"pole": "maybe"}, "pole"),
     ],
 )
@@ -203,6 +204,10 @@ def test_render_params_accept_command_line_strings() -> None:
     assert params.size == (120, 160)
     assert params.light_direction == (0.0, 1.0, -1.0)
     assert params.pole is False and params.camera_distance is None and params.fov_deg == 35.0
+    # `physinfer simulate --render-set image_size=160` passes numbers as floats.
+    assert FlagRenderParams.from_mapping({"image_size": 160.0}).size == (160, 160)
+    with pytest.raises(UserInputError, match="image_size"):
+        FlagRenderParams.from_mapping({"image_size": 160.5})
 
 
 def test_default_render_params_are_complete_and_valid(renderer: FlagRenderer) -> None:
