@@ -1,0 +1,280 @@
+"""The flag's Simulator role: θ (wind speed, area weight, 15 bending multipliers) → Trajectory.
+
+:class:`FlagSimulator` maps a parameter set onto the cloth solver of
+:mod:`physinfer_flag.cloth`: the area weight sets the node masses, the 15 multipliers
+scale the camel-ponte-roma bending table entry by entry, and the wind speed is the base
+of the wind schedule (which effects may rewrite, see :mod:`physinfer_flag.cloth_wind`).
+After a warm-up from rest it records ``n_frames`` frames at ``fps``. Conventions of the
+trajectory: metres, z up, the pole vertical along z at x = y = 0 from the ground (z = 0)
+to ``pole_height``, the hoist edge on the pole, wind along +x by default, so the flag
+streams towards +x. ``extras`` hold ``uv`` ``(V, 2)`` texture coordinates (u hoist 0 →
+fly 1, v bottom 0 → top 1), ``pole`` ``(2, 3)`` (bottom and top point) and
+``grid_shape`` ``(2,)`` = ``(nv, nu)`` (vertex ``j * nu + i`` is row ``j``, column ``i``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from physinfer.errors import SimulationFailed, UserInputError
+from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.roles import Effect, Params, Simulator
+from physinfer.types import Trajectory
+from physinfer_flag.cloth import ClothPhysics, ClothSolver, FlagRun
+from physinfer_flag.cloth_mesh import FlagMesh, build_flag_mesh
+from physinfer_flag.cloth_wind import WindState, sample_wind
+from physinfer_flag.material import (
+    BEND_DIRECTIONS_DEG,
+    HALF_CURVATURE_SAMPLES,
+    ClothMaterial,
+    bending_multipliers,
+    load_material,
+    scaled_bending,
+)
+
+#: Gap between the flag's top hoist corner and the top of the pole, metres.
+POLE_CAP = 0.05
+
+
+def flag_parameter_space() -> ParameterSpace:
+    """θ of the flag (the paper's Table 1), 17 parameters in this order.
+
+    ``wind_speed`` [0, 10] m/s, ``area_weight`` [0.10, 0.17] kg/m², then the 15 bending
+    multipliers [0.1, 10] (log scale) of the camel-ponte-roma table, direction-major:
+    ``bend_0deg_c00`` … ``bend_0deg_c20``, ``bend_45deg_c00`` …, ``bend_90deg_c20``.
+    """
+    specs = [
+        ParameterSpec("wind_speed", (0.0, 10.0), "m/s", "linear",
+                      "wind speed at the flag's mid-height, blowing along +x"),
+        ParameterSpec("area_weight", (0.10, 0.17), "kg/m^2", "linear", "area density of the fabric"),
+    ]
+    for d in BEND_DIRECTIONS_DEG:
+        for c in HALF_CURVATURE_SAMPLES:
+            specs.append(
+                ParameterSpec(
+                    f"bend_{d}deg_c{c:02d}", (0.1, 10.0), "", "log",
+                    f"multiplier of the bending stiffness at {d} deg to the warp, half-curvature {c} 1/m",
+                )
+            )
+    return ParameterSpace(specs)
+
+
+@dataclass(frozen=True)
+class FlagSimConfig:
+    """Settings of :class:`FlagSimulator` (everything but θ).
+
+    Attributes:
+        width: Hoist-to-fly length in metres (aspect 3:2 by default: a 1.5 m × 1 m flag, a
+            common size on poles; its grid resolves the fabric's bending, see docs).
+        height: Hoist length in metres.
+        grid_u: Nodes from hoist to fly.
+        grid_v: Nodes from bottom to top. Square cells (``width/(grid_u-1)`` =
+            ``height/(grid_v-1)``) put every hinge exactly on a table direction.
+        pin_mode: ``"edge"``: the whole hoist edge is held on the pole; ``"corners"``: only
+            the two hoist corners (ArcSim's flag scene; use with ``strain_limit``).
+        n_frames: Recorded frames.
+        fps: Output frame rate in Hz.
+        warmup_s: Simulated seconds from rest before recording starts (rounded to frames).
+        substeps: Integration steps per output frame; ``dt = 1 / (fps · substeps)``.
+        rho_air: Air density in kg/m³ (normal pressure ``ρ A |v_n| v_n n``).
+        c_drag: Tangential drag coefficient in kg/(m²·s) (``c A v_t``).
+        gravity: Gravitational acceleration in m/s².
+        damping: Kelvin–Voigt damping time of the stretching stress, seconds.
+        strain_limit: Largest edge stretch kept by strain limiting (0 turns it off).
+        wind_direction_deg: Base wind direction, degrees from +x towards +y.
+        perturbation_m: Largest out-of-plane offset of the seeded initial shape, metres.
+        pole_height: Height of the pole's top above the ground (z = 0), metres; the flag's
+            top hoist corner is 5 cm below it.
+        material_path: Material JSON; ``None`` uses the shipped camel-ponte-roma.
+    """
+
+    width: float = 1.5
+    height: float = 1.0
+    grid_u: int = 31
+    grid_v: int = 21
+    pin_mode: Literal["edge", "corners"] = "edge"
+    n_frames: int = 60
+    fps: float = 25.0
+    warmup_s: float = 2.0
+    substeps: int = 48
+    rho_air: float = 1.2
+    c_drag: float = 0.05
+    gravity: float = 9.81
+    damping: float = 1e-4
+    strain_limit: float = 0.05
+    wind_direction_deg: float = 0.0
+    perturbation_m: float = 0.01
+    pole_height: float = 3.0
+    material_path: str | None = None
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` naming the first bad setting and its valid range."""
+        checks = [
+            (self.width > 0 and self.height > 0, f"flag size must be positive, got {self.width} x {self.height} m"),
+            (3 <= self.grid_u <= 1000 and 3 <= self.grid_v <= 1000,
+             f"grid_u and grid_v must be in [3, 1000], got {self.grid_u} x {self.grid_v}"),
+            (self.pin_mode in ("edge", "corners"), f"pin_mode must be 'edge' or 'corners', got {self.pin_mode!r}"),
+            (1 <= self.n_frames <= 100_000, f"n_frames must be in [1, 100000], got {self.n_frames}"),
+            (0 < self.fps <= 1000, f"fps must be in (0, 1000], got {self.fps}"),
+            (0 <= self.warmup_s <= 600, f"warmup_s must be in [0, 600] s, got {self.warmup_s}"),
+            (1 <= self.substeps <= 100_000, f"substeps must be in [1, 100000], got {self.substeps}"),
+            (self.rho_air >= 0, f"rho_air must be >= 0 kg/m^3, got {self.rho_air}"),
+            (self.c_drag >= 0, f"c_drag must be >= 0, got {self.c_drag}"),
+            (self.gravity >= 0, f"gravity must be >= 0, got {self.gravity}"),
+            (0 <= self.damping <= 0.01, f"damping must be in [0, 0.01] s, got {self.damping}"),
+            (0 <= self.strain_limit < 1, f"strain_limit must be in [0, 1), got {self.strain_limit}"),
+            (math.isfinite(self.wind_direction_deg), "wind_direction_deg must be finite"),
+            (0 <= self.perturbation_m <= 0.5 * self.width, f"perturbation_m must be in [0, width/2], got {self.perturbation_m}"),
+            (self.pole_height >= self.height + POLE_CAP,
+             f"pole_height must be at least height + {POLE_CAP} m = {self.height + POLE_CAP} m, got {self.pole_height}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise UserInputError(message)
+        if self.dt > 0.01:
+            raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
+
+    @property
+    def dt(self) -> float:
+        """Integration step in seconds."""
+        return 1.0 / (self.fps * self.substeps)
+
+    @property
+    def warmup_frames(self) -> int:
+        """Warm-up length in whole output frames."""
+        return int(round(self.warmup_s * self.fps))
+
+    @property
+    def duration(self) -> float:
+        """Simulated seconds per clip, warm-up included."""
+        return (self.warmup_frames + self.n_frames) / self.fps
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready settings (rebuild with ``FlagSimConfig(**d)``)."""
+        return asdict(self)
+
+
+class FlagSimulator(Simulator):
+    """Simulates a flag on a pole in the wind (Wang bending, camel-ponte-roma stretching).
+
+    Args:
+        config: Settings; ``None`` uses the defaults.
+        effects: Effects switched into the wind; each must understand the flag's
+            :class:`~physinfer_flag.cloth_wind.WindState` in ``term(state, params, t)``
+            and return a new one. Their parameters are appended to θ.
+
+    Raises:
+        UserInputError: on bad settings or an effect of another phenomenon.
+    """
+
+    def __init__(self, *, config: FlagSimConfig | None = None, effects: Sequence[Effect] = ()) -> None:
+        self.config = config or FlagSimConfig()
+        self.config.validate()
+        self.effects = tuple(effects)
+        space = flag_parameter_space()
+        for effect in self.effects:
+            if getattr(effect, "phenomenon", "flag") != "flag":
+                raise UserInputError(
+                    f"effect {getattr(effect, 'name', effect)!r} belongs to {effect.phenomenon!r}, not to 'flag'"
+                )
+            space = space.merged(effect.parameter_space)
+        self.parameter_space = space
+        c = self.config
+        self.material: ClothMaterial = load_material(c.material_path)
+        self.mesh: FlagMesh = build_flag_mesh(
+            width=c.width, height=c.height, nu=c.grid_u, nv=c.grid_v, pin_mode=c.pin_mode,
+            top_z=c.pole_height - POLE_CAP,
+        )
+        physics = ClothPhysics(
+            dt=c.dt, gravity=c.gravity, rho_air=c.rho_air, c_drag=c.c_drag,
+            damping=c.damping, strain_limit=c.strain_limit,
+        )
+        self.solver = ClothSolver(
+            mesh=self.mesh, material=self.material, physics=physics, substeps=c.substeps,
+            perturbation=c.perturbation_m,
+        )
+        self._extras = {
+            "uv": self.mesh.uv.astype(np.float32),
+            "pole": np.array([[0.0, 0.0, 0.0], [0.0, 0.0, c.pole_height]], dtype=np.float32),
+            "grid_shape": np.array([c.grid_v, c.grid_u], dtype=np.int32),
+        }
+
+    @property
+    def flag_centre_height(self) -> float:
+        """Height of the flag's middle above the ground, metres (the wind's reference height)."""
+        return self.config.pole_height - POLE_CAP - 0.5 * self.config.height
+
+    def flag_run(self, params: Params, *, seed: int = 0) -> FlagRun:
+        """The solver inputs of one parameter set (validated and completed with defaults).
+
+        Raises:
+            UserInputError: for unknown names or values out of bounds.
+        """
+        full = self.parameter_space.complete(params)
+        bending = scaled_bending(self.material, bending_multipliers(full))
+        base = WindState(speed=full["wind_speed"], z_ref=self.flag_centre_height, seed=int(seed))
+        wind = sample_wind(
+            base, duration=self.config.duration, direction=math.radians(self.config.wind_direction_deg),
+            effects=self.effects, params=full,
+        )
+        return FlagRun(area_weight=full["area_weight"], bending=bending, wind=wind, seed=int(seed))
+
+    def simulate(self, params: Params, *, seed: int = 0) -> Trajectory:
+        """Simulate one flag; ``vertices`` ``(n_frames, V, 3)`` after the warm-up.
+
+        Raises:
+            SimulationFailed: on NaN or blow-up.
+            UserInputError: for bad parameters.
+        """
+        run = self.flag_run(params, seed=seed)
+        vertices = self.solver.run(run, warmup_frames=self.config.warmup_frames, n_frames=self.config.n_frames)
+        return self._trajectory(vertices)
+
+    def simulate_batch(self, params: Sequence[Params], *, seeds: Sequence[int]) -> list[Trajectory]:
+        """Simulate ``B`` flags in parallel compiled threads (numba); same results as :meth:`simulate`.
+
+        Raises:
+            SimulationFailed: if any flag fails; the message lists the failed indices.
+        """
+        if len(params) != len(seeds):
+            raise UserInputError(f"got {len(params)} parameter sets but {len(seeds)} seeds")
+        if not params:
+            return []
+        runs = [self.flag_run(p, seed=s) for p, s in zip(params, seeds, strict=True)]
+        vertices, status = self.solver.run_batch(
+            runs, warmup_frames=self.config.warmup_frames, n_frames=self.config.n_frames
+        )
+        failed = [(b, int(st), int(fr)) for b, (st, fr) in enumerate(status) if st != 0]
+        if failed:
+            details = "; ".join(f"#{b}: {self.solver.failure_message(st, fr)}" for b, st, fr in failed)
+            raise SimulationFailed(f"{len(failed)} of {len(runs)} flags failed: {details}")
+        return [self._trajectory(vertices[b]) for b in range(len(runs))]
+
+    def _trajectory(self, vertices: np.ndarray) -> Trajectory:
+        if not np.isfinite(vertices).all():
+            raise SimulationFailed("cloth simulation produced NaN")
+        extras = {k: v.copy() for k, v in self._extras.items()}
+        return Trajectory(vertices, self.mesh.faces.copy(), float(self.config.fps), extras)
+
+
+def make_simulator(effects: Sequence[Effect] = (), **config: Any) -> FlagSimulator:
+    """Factory of the phenomenon record: ``make_simulator(effects, grid_u=46, ...)``.
+
+    Args:
+        effects: Effects to switch in (see :class:`FlagSimulator`).
+        **config: Any :class:`FlagSimConfig` field.
+
+    Raises:
+        UserInputError: on an unknown setting name or a bad value.
+    """
+    known = set(FlagSimConfig.__dataclass_fields__)
+    unknown = sorted(set(config) - known)
+    if unknown:
+        raise UserInputError(f"unknown flag simulator setting(s) {unknown}; known: {sorted(known)}")
+    return FlagSimulator(config=FlagSimConfig(**config), effects=effects)
+
