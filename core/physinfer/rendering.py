@@ -9,6 +9,7 @@ half a second, so :class:`OffscreenContext` keeps one per renderer and reuses it
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,10 +54,20 @@ class OffscreenContext:
     Args:
         width: Viewport width in pixels.
         height: Viewport height in pixels.
+        mesh_shaders: Optional ``(vertex, fragment)`` shader files used instead of
+            pyrender's ``mesh.vert``/``mesh.frag`` for every mesh. They receive pyrender's
+            attribute-location defines and uniforms (uniforms they do not declare are
+            skipped), so a plugin can trade pyrender's physically based shading for a
+            cheaper model.
     """
 
-    def __init__(self, width: int, height: int) -> None:
+    def __init__(self, width: int, height: int, *, mesh_shaders: tuple[str | Path, str | Path] | None = None) -> None:
         self.width, self.height = width, height
+        self.mesh_shaders = None if mesh_shaders is None else tuple(str(Path(f).resolve()) for f in mesh_shaders)
+        if self.mesh_shaders is not None:
+            missing = [f for f in self.mesh_shaders if not Path(f).is_file()]
+            if missing:
+                raise FileNotFoundError(f"shader file(s) not found: {', '.join(missing)}")
         self._renderer: Any = None
 
     _open = 0
@@ -121,6 +132,8 @@ class OffscreenContext:
             try:
                 self._renderer = pyrender.OffscreenRenderer(self.width, self.height)
                 OffscreenContext._open += 1
+                if self.mesh_shaders is not None:
+                    self._renderer._renderer._program_cache = _mesh_shader_cache(*self.mesh_shaders)
             except Exception as exc:
                 from physinfer.errors import PhysinferError
 
@@ -147,6 +160,23 @@ class OffscreenContext:
             self.close()
         except Exception:
             pass
+
+
+def _mesh_shader_cache(vertex: str, fragment: str) -> Any:
+    """A pyrender shader-program cache that builds meshes from ``vertex``/``fragment``."""
+    from pyrender.shader_program import ShaderProgramCache
+
+    class MeshShaderCache(ShaderProgramCache):  # type: ignore[misc]
+        def get_program(
+            self, vertex_shader: str, fragment_shader: str, geometry_shader: str | None = None,
+            defines: dict[str, Any] | None = None,
+        ) -> Any:
+            # pyrender joins names to its shader folder; absolute paths survive the join.
+            if (vertex_shader, fragment_shader, geometry_shader) == ("mesh.vert", "mesh.frag", None):
+                vertex_shader, fragment_shader = vertex, fragment
+            return super().get_program(vertex_shader, fragment_shader, geometry_shader, defines)
+
+    return MeshShaderCache()
 
 
 def _release_egl_context_only(renderer: Any) -> None:

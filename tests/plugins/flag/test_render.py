@@ -139,6 +139,28 @@ def test_texture_is_upright_with_hoist_at_the_pole(renderer: FlagRenderer, magen
     assert fly[0] > fly[2] + 60, f"red at the fly (right), got {fly}"
 
 
+@pytest.mark.parametrize(
+    ("light", "ambient", "light_direction"),
+    [(2.5, 0.3, (0.35, 0.8, -0.5)), (0.0, 0.3, (0.0, 1.0, 0.0)), (2.0, 0.0, (0.0, 1.0, 0.0)), (2.0, 0.2, (0.0, -1.0, 0.0))],
+)
+def test_white_cloth_brightness_follows_diffuse_lighting(
+    renderer: FlagRenderer, magenta_background: str, light: float, ambient: float, light_direction: tuple
+) -> None:
+    # A flat white field facing the camera (normal -y): linear radiance is
+    # ambient + intensity · max(n · -direction, 0) / π, shown with gamma 2.2. Light from
+    # behind the flag (last case) leaves only the ambient term: the lit side is the one
+    # the light falls on, whichever side the camera sees.
+    zeta = SMALL | {"background": magenta_background, "pole": False, "texture": "japan",
+                    "light_intensity": light, "ambient_intensity": ambient, "light_direction": light_direction}
+    frame = renderer.render(waving_sheet(n_frames=1, amplitude=0.0), zeta).frames[0]
+    rows, cols = np.nonzero(flag_mask(frame))
+    white = frame[rows.min() + 3, cols.min() + 3].astype(float)
+    d = np.asarray(light_direction, dtype=float) / np.linalg.norm(light_direction)
+    linear = min(1.0, ambient + light * max(d[1], 0.0) / np.pi)
+    expected = 255.0 * linear ** (1.0 / 2.2)
+    np.testing.assert_allclose(white, expected, atol=3.0)
+
+
 def test_flag_stays_in_view_flying_or_drooping(renderer: FlagRenderer, magenta_background: str) -> None:
     flying = waving_sheet(n_frames=1, length=3.0, height=2.0, hoist_top=8.0, amplitude=0.4)
     # Drooping in a light wind: the hoist stays on the pole, every row hangs 25° down.

@@ -1,0 +1,114 @@
+"""Tests of :mod:`physinfer.rendering`: camera poses and the reusable headless context."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.rendering import OffscreenContext, look_at, spherical_camera
+
+
+def triangle_scene(offset: float = 0.0) -> tuple[object, object]:
+    """A scene with one white triangle in front of the camera, and that triangle's primitive."""
+    import pyrender
+
+    positions = np.array([[-0.5 + offset, -0.5, 0.0], [0.5 + offset, -0.5, 0.0], [offset, 0.5, 0.0]], np.float32)
+    normals = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (3, 1))
+    material = pyrender.MetallicRoughnessMaterial(baseColorFactor=[1.0, 1.0, 1.0, 1.0])
+    primitive = pyrender.Primitive(positions=positions, normals=normals, indices=np.array([[0, 1, 2]]),
+                                   material=material)
+    scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
+    scene.add(pyrender.Mesh([primitive]))
+    scene.add(pyrender.PerspectiveCamera(yfov=1.0), pose=look_at(np.array([0.0, 0.0, 2.0]), np.zeros(3),
+                                                                 up=np.array([0.0, 1.0, 0.0])))
+    return scene, primitive
+
+
+def test_look_at_points_the_camera_minus_z_axis_at_the_target() -> None:
+    eye, target = np.array([1.0, -3.0, 2.0]), np.array([0.0, 0.0, 1.0])
+    pose = look_at(eye, target)
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    np.testing.assert_allclose(-pose[:3, 2], forward, atol=1e-12)
+    np.testing.assert_allclose(pose[:3, 3], eye)
+    np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
+    assert pose[2, 1] > 0, "image up has a positive z component"
+    straight_down = look_at(np.array([0.0, 0.0, 5.0]), np.zeros(3))
+    assert np.isfinite(straight_down).all()
+
+
+def test_spherical_camera_azimuth_zero_looks_along_plus_x() -> None:
+    pose = spherical_camera(np.zeros(3), 4.0, 0.0, 0.0)
+    np.testing.assert_allclose(pose[:3, 3], [-4.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_rgba_render_has_coverage_alpha() -> None:
+    scene, _ = triangle_scene()
+    context = OffscreenContext(32, 32)
+    try:
+        rgba = context.render(scene, rgba=True)
+        rgb = context.render(scene)
+    finally:
+        context.close()
+    assert rgba.shape == (32, 32, 4) and rgb.shape == (32, 32, 3)
+    assert rgba[0, 0, 3] == 0 and rgba[16, 16, 3] == 255
+    np.testing.assert_array_equal(rgba[..., :3], rgb)
+
+
+def test_update_vertices_reaches_the_gpu() -> None:
+    moved_scene, _ = triangle_scene(offset=0.3)
+    scene, primitive = triangle_scene()
+    context = OffscreenContext(32, 32)
+    try:
+        before = context.render(scene)
+        expected = context.render(moved_scene)
+        context.update_vertices(primitive, primitive.positions + np.array([0.3, 0.0, 0.0], np.float32))
+        after = context.render(scene)
+    finally:
+        context.close()
+    assert np.abs(before.astype(int) - after).max() > 100
+    np.testing.assert_array_equal(after, expected)
+
+
+def test_closing_one_context_keeps_the_others_working() -> None:
+    # pyrender's own delete() terminates the EGL display that all contexts share.
+    first, second = OffscreenContext(16, 16), OffscreenContext(16, 16)
+    scene_a, _ = triangle_scene()
+    scene_b, _ = triangle_scene()
+    try:
+        reference = first.render(scene_a)
+        second.render(scene_b)
+        second.close()
+        np.testing.assert_array_equal(first.render(scene_a), reference)
+    finally:
+        first.close()
+        second.close()
+    third = OffscreenContext(16, 16)
+    try:
+        np.testing.assert_array_equal(third.render(triangle_scene()[0]), reference)
+    finally:
+        third.close()
+
+
+def test_missing_mesh_shader_is_reported(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="nope.frag"):
+        OffscreenContext(8, 8, mesh_shaders=(tmp_path / "nope.vert", tmp_path / "nope.frag"))
+
+
+def test_custom_mesh_shaders_are_used(tmp_path: Path) -> None:
+    vertex = tmp_path / "flat.vert"
+    vertex.write_text(
+        "#version 330 core\nlayout(location = 0) in vec3 position;\nlayout(location = INST_M_LOC) in mat4 inst_m;\n"
+        "uniform mat4 M;\nuniform mat4 V;\nuniform mat4 P;\n"
+        "void main() { gl_Position = P * V * M * inst_m * vec4(position, 1.0); }\n"
+    )
+    fragment = tmp_path / "flat.frag"
+    fragment.write_text("#version 330 core\nout vec4 frag_color;\nvoid main() { frag_color = vec4(0.0, 1.0, 0.0, 1.0); }\n")
+    scene, _ = triangle_scene()
+    context = OffscreenContext(32, 32, mesh_shaders=(vertex, fragment))
+    try:
+        image = context.render(scene)
+    finally:
+        context.close()
+    np.testing.assert_array_equal(image[16, 16], [0, 255, 0])
