@@ -272,6 +272,7 @@ def test_resume_after_interruption_matches_uninterrupted_run(reference, tmp_path
     assert snapshot(root) == snapshot(reference)
     again = generate_dataset(gen, root, preset=TINY, seed=7, workers=0)
     assert (again.units_generated, again.renders_generated, sum(again.renders.values())) == (0, 0, 19)
+    assert again.executor.kind == "none"
 
 
 def test_corrupted_and_truncated_shards_are_regenerated(reference, tmp_path):

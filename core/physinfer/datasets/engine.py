@@ -72,7 +72,8 @@ class ExecutorInfo:
     """What ran the units.
 
     Attributes:
-        kind: ``"inline"``, ``"processes"`` or ``"dask"``.
+        kind: ``"inline"``, ``"processes"``, ``"dask"``, ``"none"`` (nothing left to run) or
+            the class name of an executor passed in.
         workers: Worker processes (Dask: workers known to the scheduler at start).
         threads: Thread cap per worker for numerical libraries (``None``: untouched).
         address: The Dask scheduler address, if any.
@@ -295,7 +296,10 @@ def generate_dataset(
         remove_stale_temporaries(root)
         units = plan_dataset(generator, preset, seed)
         records, todo, regenerated = _resume_state(root, units, verify=verify, progress=progress)
-        if executor is not None:
+        if not todo:  # nothing to run: start no processes and contact no scheduler
+            info = ExecutorInfo("none", 0, None)
+            new_records = _run_units(generator, root, preset, seed, todo, InlineExecutor(), info, progress, units)
+        elif executor is not None:
             info = ExecutorInfo(type(executor).__name__, workers or 32, threads_per_worker)
             new_records = _run_units(generator, root, preset, seed, todo, executor, info, progress, units)
         else:
