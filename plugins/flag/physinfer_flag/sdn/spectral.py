@@ -2,10 +2,11 @@
 
 A video volume ``(N, C, T, H, W)`` is read as ``N·C·H·W`` temporal signals. Each signal
 is Hann-windowed and Fourier-transformed along ``T``; its periodogram
-``I(ω) = |F(ω)|² / T`` is searched for the ``k`` strongest peaks, and their powers and
-frequencies (in Hz, hence the frame rate) are returned as a 2D feature map
-``(N, 2kC, H, W)``: the ``kC`` power channels first, then the ``kC`` frequency channels,
-channel index ``c·k + i`` for peak ``i`` of input channel ``c``.
+``I(ω) = |F(ω)|² / T`` is searched for the ``k`` strongest peaks (local maxima; for
+``k = 1`` simply the strongest bin), and their powers and frequencies (in Hz, hence the
+frame rate) are returned as a 2D feature map ``(N, 2kC, H, W)``: the ``kC`` power
+channels first, then the ``kC`` frequency channels, channel index ``c·k + i`` for peak
+``i`` of input channel ``c``.
 
 Two interchangeable implementations: ``"fft"`` (``torch.fft.rfft``, the literal
 algorithm, kept as the reference) and ``"matmul"`` (the window, the optional mean
@@ -173,7 +174,12 @@ def power_from_coefficients(
 def select_peaks(
     power: torch.Tensor, settings: SpectralSettings, n_frames: int, dim: int = -1
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The ``k`` strongest bins of a periodogram and their frequencies in Hz.
+    """The ``k`` strongest peaks of a periodogram and their frequencies in Hz.
+
+    For ``k = 1`` this is the strongest bin. For ``k > 1`` only local maxima count as
+    peaks, so that the bins beside a strong peak (the Hann window's main lobe spreads a
+    tone over three bins) are not reported as further peaks; when a signal has fewer
+    than ``k`` local maxima, the missing peaks have power 0 at 0 Hz.
 
     Args:
         power: ``(..., F, ...)`` periodogram, bins along ``dim``.
@@ -190,13 +196,21 @@ def select_peaks(
             f"k={settings.k} peaks requested but only {power.shape[dim]} frequency bins exist "
             f"for {n_frames} frames; lower k or use longer clips"
         )
+    step = settings.fps / settings.dft_length(n_frames)
     if settings.k == 1:
         values, index = power.max(dim=dim, keepdim=True)
-    else:
-        values, index = power.topk(settings.k, dim=dim, largest=True, sorted=True)
-    step = settings.fps / settings.dft_length(n_frames)
+        return values, (index + settings.first_bin()).to(power.dtype) * step
+    p = power.movedim(dim, -1)
+    edge = torch.full_like(p[..., :1], -torch.inf)
+    left, right = torch.cat([edge, p[..., :-1]], -1), torch.cat([p[..., 1:], edge], -1)
+    # ">=" on one side and ">" on the other: a flat top counts once.
+    peaks = torch.where((p >= left) & (p > right), p, -torch.inf)
+    values, index = peaks.topk(settings.k, dim=-1, largest=True, sorted=True)
     hz = (index + settings.first_bin()).to(power.dtype) * step
-    return values, hz
+    missing = torch.isinf(values)
+    values = torch.where(missing, torch.zeros_like(values), values)
+    hz = torch.where(missing, torch.zeros_like(hz), hz)
+    return values.movedim(-1, dim), hz.movedim(-1, dim)
 
 
 def spectral_decomposition(x: torch.Tensor, settings: SpectralSettings) -> torch.Tensor:

@@ -17,6 +17,28 @@ from physinfer_flag.sdn.data import ArrayDataset
 THETA_NAMES = ("frequency_hz", "direction_rad")
 
 
+def grating_wave(
+    *,
+    frequency_hz: float,
+    direction_rad: float,
+    n_frames: int,
+    size: int,
+    fps: float,
+    wavelength_px: float,
+    phase: float,
+) -> np.ndarray:
+    """``sin`` of a travelling plane wave, ``(T, size, size)`` float64 in [-1, 1]."""
+    t = np.arange(n_frames, dtype=np.float64)[:, None, None] / fps
+    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
+    along = x * np.cos(direction_rad) + y * np.sin(direction_rad)
+    return np.sin(2 * np.pi * (along / wavelength_px - frequency_hz * t) + phase)
+
+
+def to_uint8(video: np.ndarray) -> np.ndarray:
+    """Intensities in [0, 1] → uint8 (clipped)."""
+    return np.clip(np.rint(video * 255.0), 0, 255).astype(np.uint8)
+
+
 def moving_grating(
     *,
     frequency_hz: float,
@@ -49,15 +71,19 @@ def moving_grating(
     Returns:
         ``(T, size, size)`` uint8 grayscale clip.
     """
-    t = np.arange(n_frames, dtype=np.float64)[:, None, None] / fps
-    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
-    along = x * np.cos(direction_rad) + y * np.sin(direction_rad)
-    video = brightness + contrast * np.sin(
-        2 * np.pi * (along / wavelength_px - frequency_hz * t) + phase
+    wave = grating_wave(
+        frequency_hz=frequency_hz,
+        direction_rad=direction_rad,
+        n_frames=n_frames,
+        size=size,
+        fps=fps,
+        wavelength_px=wavelength_px,
+        phase=phase,
     )
+    video = brightness + contrast * wave
     if noise > 0:
         video = video + (rng or np.random.default_rng(0)).normal(0.0, noise, video.shape)
-    return np.clip(np.rint(video * 255.0), 0, 255).astype(np.uint8)
+    return to_uint8(video)
 
 
 def grating_dataset(
@@ -71,6 +97,8 @@ def grating_dataset(
     frequency_range: tuple[float, float] = (1.0, 8.0),
     seed_jitter: float = 0.03,
     noise: float = 0.02,
+    contrast_range: tuple[float, float] = (0.2, 0.45),
+    distractor: float = 0.0,
     seed: int = 0,
 ) -> ArrayDataset:
     """A FlagSim-shaped dataset of moving gratings.
@@ -85,6 +113,10 @@ def grating_dataset(
         frequency_range: Range of temporal frequencies, Hz.
         seed_jitter: Relative perturbation of θ between seeds of one θ.
         noise: Pixel noise standard deviation.
+        contrast_range: Range of the grating's amplitude (a nuisance factor).
+        distractor: Relative amplitude of a second grating of random frequency and
+            direction over the lower half of each render (a nuisance that moves, like a
+            background); 0 for none.
         seed: Seed of everything.
 
     Returns:
@@ -101,21 +133,29 @@ def grating_dataset(
             f_sim = frequency * (1.0 + seed_jitter * rng.standard_normal())
             d_sim = direction + seed_jitter * rng.standard_normal()
             for _ in range(renders_per_sim):
-                clips.append(
-                    moving_grating(
-                        frequency_hz=f_sim,
-                        direction_rad=d_sim,
+                contrast = rng.uniform(*contrast_range)
+                wave = grating_wave(
+                    frequency_hz=f_sim,
+                    direction_rad=d_sim,
+                    n_frames=n_frames,
+                    size=size,
+                    fps=fps,
+                    wavelength_px=rng.uniform(0.25, 0.5) * size,
+                    phase=rng.uniform(0, 2 * np.pi),
+                )
+                video = rng.uniform(0.4, 0.6) + contrast * wave
+                if distractor > 0:
+                    other = grating_wave(
+                        frequency_hz=rng.uniform(*frequency_range),
+                        direction_rad=rng.uniform(0.0, np.pi),
                         n_frames=n_frames,
                         size=size,
                         fps=fps,
                         wavelength_px=rng.uniform(0.25, 0.5) * size,
                         phase=rng.uniform(0, 2 * np.pi),
-                        contrast=rng.uniform(0.2, 0.45),
-                        brightness=rng.uniform(0.4, 0.6),
-                        noise=noise,
-                        rng=rng,
                     )
-                )
+                    video[:, size // 2 :] += distractor * contrast * other[:, size // 2 :]
+                clips.append(to_uint8(video + rng.normal(0.0, noise, video.shape)))
                 sims.append(sim)
                 groups.append(g)
                 thetas.append((frequency, direction))
