@@ -41,6 +41,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--texture", default="netherlands", help="flag texture (default: netherlands)")
     parser.add_argument("--background", default="sky_cloudy", help="background (default: sky_cloudy)")
     parser.add_argument("--resolution", type=int, default=21, help="sheet vertices along the hoist (default: 21)")
+    parser.add_argument("--pyrender-shader", action="store_true",
+                        help="shade with pyrender's physically based mesh shader instead of the plugin's Lambert one")
     return parser.parse_args(argv)
 
 
@@ -95,8 +97,11 @@ def breakdown(renderer: Any, trajectory: Any, zeta: dict[str, Any]) -> dict[str,
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Time the renderer; returns the JSON record."""
+    import physinfer_flag.render as flag_render
     from physinfer_flag.render import FlagRenderer, waving_sheet
 
+    if args.pyrender_shader:
+        flag_render.MESH_SHADERS = None  # contexts are created with pyrender's own shaders
     if args.frames < 2:
         raise SystemExit("--frames must be at least 2")
     zeta = {"image_size": args.size, "texture": args.texture, "background": args.background, "pole": True}
@@ -133,6 +138,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "faces": int(long.faces.shape[0]),
         "texture": args.texture,
         "background": args.background,
+        "shader": "pyrender mesh.frag (PBR)" if args.pyrender_shader else "lambert",
         "gl_renderer": gl_name,
         "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
         "cpu_count": os.cpu_count(),

@@ -474,7 +474,14 @@ class FlagRenderer(Renderer):
         )
         scene.add(pyrender.Mesh([flag]))
         if params.pole:
-            scene.add(_pole_mesh(geometry))
+            # pyrender draws solid meshes sorted by the distance of their node's origin from
+            # the camera, ties in set order (object ids, so varying between runs). Where the
+            # flag passes into the pole a sample can have equal depths for both, and draw
+            # order then decides it: an origin at the pole's top (not the flag's (0, 0, 0))
+            # keeps the order, hence the pixels, the same in every run.
+            pose = np.eye(4)
+            pose[:3, 3] = geometry.pole[1]
+            scene.add(_pole_mesh(geometry), pose=pose)
         camera, camera_pose = _camera(geometry, params)
         scene.add(camera, pose=camera_pose)
         light_pose = look_at(np.zeros(3), np.asarray(params.light_direction, dtype=float))
@@ -483,14 +490,14 @@ class FlagRenderer(Renderer):
 
 
 def _pole_mesh(geometry: FlagGeometry) -> Any:
+    """Shaft and ball finial, in coordinates relative to the pole's top point."""
     import pyrender
     import trimesh
 
     radius = 0.01 + 0.012 * geometry.length
-    bottom, top = geometry.pole
+    bottom, top = geometry.pole - geometry.pole[1]
     shaft = trimesh.creation.cylinder(radius=radius, segment=np.stack([bottom, top]), sections=16)
     finial = trimesh.creation.icosphere(subdivisions=1, radius=1.8 * radius)
-    finial.apply_translation(top)
     material = pyrender.MetallicRoughnessMaterial(
         baseColorFactor=[0.82, 0.82, 0.8, 1.0], metallicFactor=0.4, roughnessFactor=0.45
     )
