@@ -274,18 +274,30 @@ class SpectralFrontEnd(nn.Module):
         Returns:
             ``(N, T, 2, H/2, W/2)`` pooled x- and y-derivative volumes.
         """
-        x = _to_float_video(video)
-        n, t, h, w = x.shape
-        k = self._constants(t, h, w, x.device, x.dtype)
-        frames = (k.temporal @ x.reshape(n, t, h * w)).reshape(n * t, h, w)
-        pooled = torch.empty(n * t, 2, h // 2, w // 2, device=x.device, dtype=x.dtype)
-        # Frames are filtered a few at a time: every frame is independent once the
-        # temporal Gaussian is applied, and small blocks keep the FFT buffers in cache
-        # (three times faster than one pass over the whole clip on a 2-core CPU).
+        if video.ndim != 4:
+            raise UserInputError(
+                f"the front end takes videos (N, T, H, W), got shape {tuple(video.shape)}"
+            )
+        n, t, h, w = video.shape
+        dtype = video.dtype if video.is_floating_point() else torch.float32
+        k = self._constants(t, h, w, video.device, dtype)
+        pooled = torch.empty(n, t, 2, h // 2, w // 2, device=video.device, dtype=dtype)
+        if video.device.type != "cpu":
+            frames = (k.temporal @ _to_float_video(video).reshape(n, t, h * w)).reshape(n * t, h, w)
+            self._filter_and_pool(frames, k, out=pooled.view(n * t, 2, h // 2, w // 2))
+            return pooled
+        # On CPU, one clip and a few frames at a time: every frame is independent once
+        # the temporal Gaussian is applied, and small blocks keep the FFT buffers in
+        # cache (three times faster than one pass over a whole clip on a 2-core CPU).
         step = max(1, _CHUNK_BYTES // (16 * k.n_h * k.n_w))
-        for start in range(0, n * t, step):
-            self._filter_and_pool(frames[start : start + step], k, out=pooled[start : start + step])
-        return pooled.reshape(n, t, 2, h // 2, w // 2)
+        for i in range(n):
+            clip = _to_float_video(video[i : i + 1]).reshape(t, h * w)
+            frames = (k.temporal @ clip).reshape(t, h, w)
+            for start in range(0, t, step):
+                self._filter_and_pool(
+                    frames[start : start + step], k, out=pooled[i, start : start + step]
+                )
+        return pooled
 
     def _filter_and_pool(
         self, frames: torch.Tensor, k: _FusedConstants, *, out: torch.Tensor
