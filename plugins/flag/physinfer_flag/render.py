@@ -391,6 +391,17 @@ class FlagRenderer(Renderer):
             frames[index] = composite_over(context.render(scene, rgba=True), background)
         return Clip(frames, float(trajectory.fps))
 
+    def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Validate ζ without rendering (e.g. before a long simulation).
+
+        Returns:
+            The complete ζ with defaults filled in and values converted to their types.
+
+        Raises:
+            UserInputError: as :meth:`render` would, naming the offending key.
+        """
+        return FlagRenderParams.from_mapping(render_params).to_dict()
+
     def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
         """A random ζ for dataset variety: texture, background, camera and light.
 

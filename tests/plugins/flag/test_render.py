@@ -247,6 +247,15 @@ def test_render_params_accept_command_line_strings() -> None:
         FlagRenderParams.from_mapping({"image_size": 160.5})
 
 
+def test_check_render_params_completes_and_refuses_without_rendering() -> None:
+    renderer = FlagRenderer()  # never renders: no GL context
+    zeta = renderer.check_render_params({"image_size": 160.0, "pole": "false"})
+    assert zeta == FlagRenderParams(image_size=160, pole=False).to_dict()
+    with pytest.raises(UserInputError, match="camera_azimuth_deg"):
+        renderer.check_render_params({"camera_azimuth_deg": 30})
+    assert renderer._context is None
+
+
 def test_default_render_params_are_complete_and_valid(renderer: FlagRenderer) -> None:
     defaults = dict(renderer.default_render_params)
     assert defaults == FlagRenderParams().to_dict()
