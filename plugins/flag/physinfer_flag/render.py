@@ -376,9 +376,14 @@ class FlagRenderer(Renderer):
             Clip of ``(T, H, W, 3)`` uint8 frames at ``trajectory.fps``.
 
         Raises:
-            UserInputError: invalid ζ (the message names the key) or malformed extras.
+            UserInputError: invalid ζ (the message names the key), malformed extras, or a
+                trajectory without frames or with non-finite positions.
         """
         params = FlagRenderParams.from_mapping(render_params)
+        if trajectory.n_frames == 0:
+            raise UserInputError("the trajectory has no frames: nothing to render")
+        if not trajectory.is_finite():
+            raise UserInputError("the trajectory has NaN or infinite vertex positions; it cannot be rendered")
         height, width = params.size
         geometry = measure_flag(trajectory)
         sheet = DoubleSidedSheet(trajectory.faces, trajectory.vertices.shape[1])

@@ -320,6 +320,17 @@ def test_malformed_extras_are_refused() -> None:
         measure_flag(Trajectory(sheet.vertices, sheet.faces, 25.0, {"uv": sheet.extras["uv"], "pole": np.zeros(3)}))
 
 
+def test_empty_or_non_finite_trajectory_is_refused(renderer: FlagRenderer) -> None:
+    sheet = waving_sheet(n_frames=2)
+    empty = Trajectory(sheet.vertices[:0], sheet.faces, 25.0, dict(sheet.extras))
+    with pytest.raises(UserInputError, match="no frames"):
+        renderer.render(empty, SMALL)
+    broken = sheet.vertices.copy()
+    broken[1, 5, 2] = np.nan
+    with pytest.raises(UserInputError, match="NaN"):
+        renderer.render(Trajectory(broken, sheet.faces, 25.0, dict(sheet.extras)), SMALL)
+
+
 def test_double_sided_sheet_normals_point_both_ways() -> None:
     sheet = waving_sheet(n_frames=1, amplitude=0.0)
     double = DoubleSidedSheet(sheet.faces, sheet.vertices.shape[1])
