@@ -22,6 +22,7 @@ from physinfer_flag.cloth_kernels import (
     S_C_DRAG,
     S_DT,
     S_GRAVITY,
+    S_LOOKUP_EVERY,
     S_MAX_DIST,
     S_MAX_SPEED,
     S_RHO_AIR,
@@ -59,6 +60,9 @@ class ClothPhysics:
         max_speed: A node faster than this (m/s) marks the run as blown up.
         max_distance_factor: A node farther from the pole than this many flag diagonals
             marks the run as blown up.
+        lookup_interval: Seconds between look-ups of the stretching stiffness from the
+            current strain (ArcSim looks them up once per implicit step, 5 ms in its flag
+            scene); 0 looks them up every step.
     """
 
     dt: float = 5e-4
@@ -69,6 +73,7 @@ class ClothPhysics:
     strain_limit: float = 0.0
     max_speed: float = 80.0
     max_distance_factor: float = 2.0
+    lookup_interval: float = 0.005
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first out-of-range setting."""
@@ -81,6 +86,7 @@ class ClothPhysics:
             (0 <= self.strain_limit < 1, f"strain_limit must be in [0, 1), got {self.strain_limit}"),
             (self.max_speed > 0, f"max_speed must be positive, got {self.max_speed}"),
             (self.max_distance_factor > 1, f"max_distance_factor must exceed 1, got {self.max_distance_factor}"),
+            (0 <= self.lookup_interval <= 0.05, f"lookup_interval must be in [0, 0.05] s, got {self.lookup_interval}"),
         ]
         for ok, message in checks:
             if not ok:
@@ -144,6 +150,7 @@ class ClothSolver:
         self._scalars[S_STRAIN_LIMIT] = physics.strain_limit
         self._scalars[S_MAX_SPEED] = physics.max_speed
         self._scalars[S_MAX_DIST] = physics.max_distance_factor * diagonal
+        self._scalars[S_LOOKUP_EVERY] = max(1, round(physics.lookup_interval / physics.dt))
         # Rest-shape factors of the bending kernel (see add_bending_forces).
         self._hinge_curvature = mesh.hinge_length / (10.0 * mesh.hinge_area)
         self._hinge_shape = mesh.hinge_length**2 / (4.0 * mesh.hinge_area)

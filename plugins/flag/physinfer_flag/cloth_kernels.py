@@ -5,8 +5,9 @@ compiled code, so a single flag pays no per-step Python overhead; :func:`run_fla
 runs ``B`` flags in parallel threads (one flag per thread, no shared writes). Per substep:
 
 1. stretching (Wang et al. 2011 / ArcSim: anisotropic St. Venant–Kirchhoff membrane whose
-   four stiffnesses are looked up from the principal stretch and its direction), with
-   Kelvin–Voigt damping ``β · Ġ``, and the wind force per face;
+   four stiffnesses are looked up from the principal stretch and its direction — every
+   few substeps, as ArcSim looks them up once per 5 ms implicit step), with Kelvin–Voigt
+   damping ``β · Ġ``, and the wind force per face;
 2. bending per hinge (ArcSim's discrete dihedral-angle force with the Wang piecewise-
    linear stiffness in half-curvature);
 3. symplectic Euler: ``v += dt · a``, ``x += dt · v``; pinned nodes never move;
@@ -30,8 +31,8 @@ from physinfer_flag.cloth_wind import shear_factor, wind_at_time
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 # Indices into the ``scalars`` vector of the kernels.
-S_DT, S_GRAVITY, S_RHO_AIR, S_C_DRAG, S_BETA, S_STRAIN_LIMIT, S_MAX_SPEED, S_MAX_DIST = range(8)
-N_SCALARS = 8
+S_DT, S_GRAVITY, S_RHO_AIR, S_C_DRAG, S_BETA, S_STRAIN_LIMIT, S_MAX_SPEED, S_MAX_DIST, S_LOOKUP_EVERY = range(9)
+N_SCALARS = 9
 
 STATUS_OK, STATUS_NAN, STATUS_SPEED, STATUS_DISTANCE = 0, 1, 2, 3
 
@@ -96,13 +97,52 @@ def stretching_stiffness(c00: float, c11: float, c01: float, samples: np.ndarray
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
+def update_stiffness(
+    x: np.ndarray, faces: np.ndarray, dm_inv: np.ndarray, samples: np.ndarray, stiffness: np.ndarray
+) -> None:
+    """Look up every triangle's four stretching stiffnesses from its current strain.
+
+    Args:
+        x: ``(V, 3)`` positions.
+        faces: ``(F, 3)`` int32 triangles; dm_inv: ``(F, 4)`` inverse rest edge matrices.
+        samples: ``(2, 5, 4)`` stretching samples.
+        stiffness: ``(F, 4)`` receives ``(k0, k1, k2, k3)`` in N/m.
+    """
+    for f in range(faces.shape[0]):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        a, b, c, d = dm_inv[f, 0], dm_inv[f, 1], dm_inv[f, 2], dm_inv[f, 3]
+        e1x = x[i1, 0] - x[i0, 0]
+        e1y = x[i1, 1] - x[i0, 1]
+        e1z = x[i1, 2] - x[i0, 2]
+        e2x = x[i2, 0] - x[i0, 0]
+        e2y = x[i2, 1] - x[i0, 1]
+        e2z = x[i2, 2] - x[i0, 2]
+        xux = e1x * a + e2x * c
+        xuy = e1y * a + e2y * c
+        xuz = e1z * a + e2z * c
+        xvx = e1x * b + e2x * d
+        xvy = e1y * b + e2y * d
+        xvz = e1z * b + e2z * d
+        k0, k1, k2, k3 = stretching_stiffness(
+            xux * xux + xuy * xuy + xuz * xuz,
+            xvx * xvx + xvy * xvy + xvz * xvz,
+            xux * xvx + xuy * xvy + xuz * xvz,
+            samples,
+        )
+        stiffness[f, 0] = k0
+        stiffness[f, 1] = k1
+        stiffness[f, 2] = k2
+        stiffness[f, 3] = k3
+
+
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def add_face_forces(
     x: np.ndarray,
     v: np.ndarray,
     faces: np.ndarray,
     dm_inv: np.ndarray,
     area: np.ndarray,
-    samples: np.ndarray,
+    stiffness: np.ndarray,
     beta: float,
     wind_x: float,
     wind_y: float,
@@ -122,7 +162,7 @@ def add_face_forces(
         faces: ``(F, 3)`` int32 triangles.
         dm_inv: ``(F, 4)`` inverse rest edge matrices (row-major 2×2).
         area: ``(F,)`` rest areas (ArcSim uses the material area in both terms).
-        samples: ``(2, 5, 4)`` stretching samples.
+        stiffness: ``(F, 4)`` stretching stiffnesses from :func:`update_stiffness`.
         beta: Kelvin–Voigt damping time in seconds (stress ``C : (G + β Ġ)``).
         wind_x, wind_y: Unit horizontal wind direction.
         wind_speed: Speed at ``z_ref`` in m/s; ``shear_exp``: power-law exponent.
@@ -152,7 +192,7 @@ def add_face_forces(
         c00 = xux * xux + xuy * xuy + xuz * xuz
         c11 = xvx * xvx + xvy * xvy + xvz * xvz
         c01 = xux * xvx + xuy * xvy + xuz * xvz
-        k0, k1, k2, k3 = stretching_stiffness(c00, c11, c01, samples)
+        k0, k1, k2, k3 = stiffness[f, 0], stiffness[f, 1], stiffness[f, 2], stiffness[f, 3]
         g00 = 0.5 * (c00 - 1.0)
         g11 = 0.5 * (c11 - 1.0)
         g01 = 0.5 * c01
@@ -416,14 +456,16 @@ def run_flag(
     Args:
         x, v: ``(V, 3)`` float64 initial state, advanced in place.
         inv_mass: ``(V,)`` inverse lumped masses, 0 for pinned nodes.
-        faces, dm_inv, face_area, samples: see :func:`add_face_forces`.
+        faces, dm_inv, face_area: see :func:`add_face_forces`; samples: see
+            :func:`update_stiffness`.
         hinges, hinge_faces, hinge_curvature, hinge_shape, hinge_curve: see
             :func:`add_bending_forces`.
         edges, edge_length: ``(E, 2)``, ``(E,)`` edges for strain limiting.
         wind_table: ``(K, 3)`` wind samples ``[speed, yaw, shear exponent]``.
         wind_scalars: ``[sample dt, z_ref, base direction]``.
         scalars: ``(N_SCALARS,)`` ``[dt, gravity, rho_air, c_drag, beta, strain limit
-            (<= 0: off), max speed, max distance]``.
+            (<= 0: off), max speed, max distance, steps between stretching-stiffness
+            look-ups]``.
         substeps: Integration steps per output frame.
         warmup_frames: Frames simulated before recording.
         out: ``(T, V, 3)`` float32, receives the positions at the end of each recorded frame.
@@ -439,11 +481,13 @@ def run_flag(
     strain_limit = scalars[S_STRAIN_LIMIT]
     max_speed = scalars[S_MAX_SPEED]
     max_dist = scalars[S_MAX_DIST]
+    lookup_every = max(int(scalars[S_LOOKUP_EVERY]), 1)
     sample_dt = wind_scalars[0]
     z_ref = wind_scalars[1]
     base_dir = wind_scalars[2]
     n = x.shape[0]
     force = np.zeros((n, 3))
+    stiffness = np.zeros((faces.shape[0], 4))
     normal = np.zeros((faces.shape[0], 3))
     inv_normal_length = np.zeros(faces.shape[0])
     n_frames = warmup_frames + out.shape[0]
@@ -454,8 +498,10 @@ def run_flag(
             speed, yaw, shear_exp = wind_at_time(wind_table, sample_dt, t)
             wind_x = math.cos(base_dir + yaw)
             wind_y = math.sin(base_dir + yaw)
+            if step % lookup_every == 0:
+                update_stiffness(x, faces, dm_inv, samples, stiffness)
             force[:, :] = 0.0
-            add_face_forces(x, v, faces, dm_inv, face_area, samples, beta, wind_x, wind_y,
+            add_face_forces(x, v, faces, dm_inv, face_area, stiffness, beta, wind_x, wind_y,
                             speed, shear_exp, z_ref, rho_air, c_drag, force, normal, inv_normal_length)
             add_bending_forces(x, hinges, hinge_faces, hinge_curvature, hinge_shape, hinge_curve,
                                normal, inv_normal_length, force)

@@ -94,7 +94,7 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
     return np.asarray(faces, dtype=np.int32)
 
 
-def _hinges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mesh_hinges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interior edges with their two opposite vertices and two faces, and all unique edges.
 
     Returns:
@@ -131,7 +131,9 @@ def _bending_direction(du: np.ndarray) -> np.ndarray:
     """
     a = np.abs(np.arctan2(du[:, 1], du[:, 0]) * 4.0 / np.pi)
     a = np.where(a > 4.0, 8.0 - a, a)
-    return np.where(a > 2.0, 4.0 - a, a)
+    a = np.where(a > 2.0, 4.0 - a, a)
+    # Snap round-off so that grid edges use exactly one table row.
+    return np.where(np.abs(a - np.round(a)) < 1e-9, np.round(a), a)
 
 
 def build_flag_mesh(
@@ -180,7 +182,7 @@ def build_flag_mesh(
     for k in range(3):
         np.add.at(node_area, faces[:, k], face_area / 3.0)
 
-    hinges, hinge_faces, edges = _hinges(faces)
+    hinges, hinge_faces, edges = mesh_hinges(faces)
     du = material_uv[hinges[:, 1]] - material_uv[hinges[:, 0]]
     hinge_length = np.linalg.norm(du, axis=1)
     cross = lambda a, b: np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])  # noqa: E731
