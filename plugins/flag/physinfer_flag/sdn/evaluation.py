@@ -244,7 +244,10 @@ def target_column(dataset: SDNDataset, target: str | int) -> int:
 
 
 class RegressionHead(nn.Module):
-    """Two-layer perceptron from a feature vector to one value.
+    """Batch-normalised input, then a two-layer perceptron to one value.
+
+    The input normalisation matters for fixed embeddings, whose scale the contrastive
+    loss leaves free.
 
     Shapes:
         ``(N, in_dim)`` → ``(N,)``.
@@ -252,7 +255,9 @@ class RegressionHead(nn.Module):
 
     def __init__(self, in_dim: int, hidden: int = 256) -> None:
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+        self.net = nn.Sequential(
+            nn.BatchNorm1d(in_dim), nn.Linear(in_dim, hidden), nn.ReLU(), nn.Linear(hidden, 1)
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Predictions in normalised units."""

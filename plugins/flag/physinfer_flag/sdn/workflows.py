@@ -21,7 +21,13 @@ from typing import Any
 from torch import nn
 
 from physinfer.errors import UserInputError
-from physinfer_flag.sdn.baselines import CNNLSTM, ResNet18Frames, SpectralPooling
+from physinfer_flag.sdn.baselines import (
+    CNNLSTM,
+    CNNLSTMConfig,
+    ResNet18Frames,
+    ResNetFramesConfig,
+    SpectralPooling,
+)
 from physinfer_flag.sdn.data import PreparedClips
 from physinfer_flag.sdn.evaluation import RegressionConfig, evaluate_triplets, evaluate_wind
 from physinfer_flag.sdn.frontend import FrontEndConfig
@@ -153,7 +159,8 @@ def evaluate_wind_in_directory(
         config: Regression settings; the learned baselines are always fine-tuned.
         n_frames: Frames read by a learned baseline (default: 20 for ResNet-18, 10 for
             CNN+LSTM, as the paper).
-        spectral_frontend: Front end of the ``"spectral"`` baseline (default: the SDN's).
+        spectral_frontend: Front end of the ``"spectral"`` baseline, whose ``fps`` and
+            ``size`` also prepare the learned baselines' clips (default: the SDN's).
         device: Torch device.
 
     Returns:
@@ -186,23 +193,16 @@ def _regression_backbone(
 ) -> tuple[nn.Module, FrontEndConfig]:
     """The backbone and the clip preparation it needs (frames, size, fps)."""
     name = str(model)
+    frontend = spectral or FrontEndConfig()
     if name == "spectral":
-        frontend = spectral or FrontEndConfig()
         return SpectralPooling(frontend=frontend), frontend
     if name == "resnet18":
-        from physinfer_flag.sdn.baselines import ResNetFramesConfig
-
         frames = n_frames or 20
-        return ResNet18Frames(config=ResNetFramesConfig(n_frames=frames)), _clip_format(frames)
+        resnet = ResNet18Frames(config=ResNetFramesConfig(n_frames=frames))
+        return resnet, dataclasses.replace(frontend, n_frames=max(4, frames))
     if name == "cnn_lstm":
-        from physinfer_flag.sdn.baselines import CNNLSTMConfig
-
         frames = n_frames or 10
-        return CNNLSTM(config=CNNLSTMConfig(n_frames=frames)), _clip_format(frames)
+        lstm = CNNLSTM(config=CNNLSTMConfig(n_frames=frames))
+        return lstm, dataclasses.replace(frontend, n_frames=max(4, frames))
     network = load_sdn(model, device)
     return network, network.config.frontend
-
-
-def _clip_format(n_frames: int) -> FrontEndConfig:
-    """A front-end config used only for its clip format (fps, frames, size)."""
-    return dataclasses.replace(FrontEndConfig(), n_frames=max(4, n_frames))
