@@ -281,28 +281,26 @@ class SpectralFrontEnd(nn.Module):
         n, t, h, w = video.shape
         dtype = video.dtype if video.is_floating_point() else torch.float32
         k = self._constants(t, h, w, video.device, dtype)
-        pooled = torch.empty(n, t, 2, h // 2, w // 2, device=video.device, dtype=dtype)
         if video.device.type != "cpu":
             frames = (k.temporal @ _to_float_video(video).reshape(n, t, h * w)).reshape(n * t, h, w)
-            self._filter_and_pool(frames, k, out=pooled.view(n * t, 2, h // 2, w // 2))
-            return pooled
+            return self._filter_and_pool(frames, k).reshape(n, t, 2, h // 2, w // 2)
         # On CPU, one clip and a few frames at a time: every frame is independent once
         # the temporal Gaussian is applied, and small blocks keep the FFT buffers in
         # cache (three times faster than one pass over a whole clip on a 2-core CPU).
         step = max(1, _CHUNK_BYTES // (16 * k.n_h * k.n_w))
+        pooled = torch.empty(n, t, 2, h // 2, w // 2, device=video.device, dtype=dtype)
         for i in range(n):
             clip = _to_float_video(video[i : i + 1]).reshape(t, h * w)
             frames = (k.temporal @ clip).reshape(t, h, w)
             for start in range(0, t, step):
-                self._filter_and_pool(
-                    frames[start : start + step], k, out=pooled[i, start : start + step]
+                # Slice assignment (not out=) keeps autograd working through the front end.
+                pooled[i, start : start + step] = self._filter_and_pool(
+                    frames[start : start + step], k
                 )
         return pooled
 
-    def _filter_and_pool(
-        self, frames: torch.Tensor, k: _FusedConstants, *, out: torch.Tensor
-    ) -> None:
-        """Derivative filters and 2x max-pool of ``(B, H, W)`` frames into ``out`` ``(B, 2, H/2, W/2)``."""
+    def _filter_and_pool(self, frames: torch.Tensor, k: _FusedConstants) -> torch.Tensor:
+        """Derivative filters and 2x max-pool: ``(B, H, W)`` frames → ``(B, 2, H/2, W/2)``."""
         r = self._radius
         h2, w2 = frames.shape[1] // 2 * 2, frames.shape[2] // 2 * 2
         x = F.pad(frames[None], (r, r, r, r), mode="replicate")[0]
@@ -313,10 +311,9 @@ class SpectralFrontEnd(nn.Module):
         spectrum = torch.fft.fft(spectrum, n=k.n_h, dim=-1)  # (B, n_w/2+1, n_h)
         rows = torch.fft.ifft(spectrum[:, None] * k.spectra, dim=-1)[..., r : r + h2]
         y = torch.fft.irfft(rows.transpose(-1, -2).contiguous(), n=k.n_w, dim=-1)[..., r : r + w2]
-        torch.maximum(
+        return torch.maximum(
             torch.maximum(y[..., 0::2, 0::2], y[..., 0::2, 1::2]),
             torch.maximum(y[..., 1::2, 0::2], y[..., 1::2, 1::2]),
-            out=out,
         )
 
     def forward(self, video: torch.Tensor) -> torch.Tensor:
