@@ -124,3 +124,15 @@ def test_config_round_trips_through_json():
         SDNConfig.from_dict({**data, "depth": 3})
     with pytest.raises(UserInputError, match="invalid"):
         SDNConfig.from_dict({**data, "widths": []})
+
+
+def test_export_keeps_provenance_and_adds_to_it(tmp_path):
+    from physinfer_flag.sdn.weights import export_weights
+
+    torch.manual_seed(0)
+    save_sdn(SDN(config=TINY), tmp_path / WEIGHTS_FILE, info={"epoch": 7})
+    out = export_weights(
+        tmp_path, tmp_path / "shipped.safetensors", info={"command": "make pretrained"}
+    )
+    assert read_sdn_metadata(out)["info"] == {"epoch": 7, "command": "make pretrained"}
+    assert load_sdn(out, "cpu").config == TINY

@@ -143,3 +143,26 @@ def load_sdn(path: str | Path, device: str | torch.device | None = None) -> SDN:
             f"{path}: the tensors do not fit the stored architecture ({exc})"
         ) from None
     return model.to(target).eval()
+
+
+def export_weights(
+    source: str | Path,
+    destination: str | Path = DEFAULT_WEIGHTS,
+    *,
+    half: bool = True,
+    info: Mapping[str, Any] | None = None,
+) -> Path:
+    """Copy trained weights to a shippable file (by default the plugin's default weights).
+
+    Args:
+        source: Weights file or training output directory.
+        destination: Where to write (default: ``physinfer_flag/data/sdn_default.safetensors``).
+        half: Store float16 (half the size; see :func:`save_sdn`).
+        info: Provenance added to the source's (e.g. the command that made it).
+
+    Returns:
+        The path written.
+    """
+    meta = read_sdn_metadata(source)
+    model = load_sdn(source, "cpu")
+    return save_sdn(model, destination, info={**meta["info"], **dict(info or {})}, half=half)
