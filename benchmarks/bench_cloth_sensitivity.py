@@ -1,16 +1,15 @@
 """How much the flag's motion changes per parameter group, at several grid resolutions.
 
-For each grid and each context wind speed, the base θ (all multipliers 1, area weight
-0.135 kg/m²) is simulated with several seeds; then each parameter group is moved to a
-low and a high value — wind ±1 m/s, area weight 0.10 vs 0.17 kg/m², the five bending
-multipliers of one direction (0°, 45°, 90°) 0.1 vs 10, all fifteen 0.1 vs 10 — and
-simulated with the same seeds. Every clip (60 frames at 25 fps after the 2 s warm-up,
-as the refinement sees them) is reduced to a motion descriptor on a common 11 × 16
-lattice of material points (time-mean shape, RMS amplitude, spectral centroid) plus the
-mean fold (dihedral) angle of the whole mesh; see :mod:`physinfer_flag.cloth_analysis`. The effect of a group is the mean descriptor
-distance between its low and high clips over all seed pairs; the noise is the mean
-distance between different seeds of the base θ (the flag is chaotic). A ratio
-effect / noise above 1 means the group changes the motion more than chaos does.
+For each grid and each context wind speed, every parameter group is moved to a low and a
+high value around the base θ (all multipliers 1, area weight 0.135 kg/m²) — wind ±1 m/s,
+area weight 0.10 vs 0.17 kg/m², the five bending multipliers of one direction (0°, 45°,
+90°) 0.1 vs 10, all fifteen 0.1 vs 10 — and simulated with ``--seeds`` seeds. Each clip
+(60 frames at 25 fps after the 2 s warm-up, as the refinement sees it) is reduced to the
+scalar features of :func:`physinfer_flag.cloth_analysis.clip_features` (reach and height
+of the fly edge, amplitude, flapping frequency, fold angle). The flag is chaotic, so the
+effect of a group on a feature is an effect size: Cohen's d between the low and the high
+clips (difference of means over the pooled spread across seeds). ``d > 1`` means a single
+clip mostly tells the two settings apart; ``max_d`` is the most telling feature.
 
 With ``--chaos-seeds N`` it also measures the chaos itself at the default grid: the
 dominant flapping frequency (fly-edge spectrum, five points) of single 60-frame clips of
@@ -18,8 +17,8 @@ the same θ over ``N`` seeds, per wind speed.
 
 Usage::
 
-    python benchmarks/bench_cloth_sensitivity.py --grids 16x11,31x21,46x31 --winds 2,6 --seeds 3
-    python benchmarks/bench_cloth_sensitivity.py --grids 31x21 --chaos-seeds 10
+    python benchmarks/bench_cloth_sensitivity.py --grids 16x11,31x21,37x25,46x31 --winds 2,6 --seeds 6
+    python benchmarks/bench_cloth_sensitivity.py --grids 31x21 --seeds 6 --chaos-seeds 10
 
 Prints exactly one JSON object on stdout; progress goes to stderr.
 """
@@ -28,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import itertools
 import json
 import math
 import platform
@@ -39,15 +37,14 @@ from typing import Any
 import numpy as np
 
 from physinfer_flag.cloth_analysis import (
-    descriptor_distance,
+    FEATURES,
+    clip_features,
     dominant_frequency,
+    effect_size,
     fly_edge_crosswind,
-    motion_descriptor,
 )
 from physinfer_flag.material import BEND_DIRECTIONS_DEG, bending_parameter_names
 from physinfer_flag.simulator import FlagSimConfig, make_simulator
-
-METRICS = ("shape", "amplitude", "centroid", "fold")
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -55,7 +52,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--grids", default="16x11,31x21,46x31", help="comma-separated NUxNV grids")
     parser.add_argument("--winds", default="2,6", help="comma-separated context wind speeds in m/s")
-    parser.add_argument("--seeds", type=int, default=3, help="seeds per parameter set")
+    parser.add_argument("--seeds", type=int, default=6, help="seeds per parameter set (>= 2)")
     parser.add_argument("--frames", type=int, default=60, help="recorded frames per clip")
     parser.add_argument("--chaos-seeds", type=int, default=0, help="seeds of the chaos study (0: skip)")
     parser.add_argument("--chaos-winds", default="2,4,6,8,10", help="wind speeds of the chaos study")
@@ -84,43 +81,35 @@ def substeps_for(nu: int, nv: int) -> int:
     return int(math.ceil(default.substeps * h0 / h))
 
 
-def mean_distance(a: list, b: list, *, same: bool) -> dict[str, float]:
-    """Mean descriptor distance over seed pairs (distinct seeds when ``same``)."""
-    pairs = [(x, y) for (i, x), (j, y) in itertools.product(enumerate(a), enumerate(b)) if not (same and i >= j)]
-    dists = [descriptor_distance(x, y) for x, y in pairs]
-    return {m: float(np.mean([d[m] for d in dists])) for m in METRICS}
-
-
 def measure_grid(nu: int, nv: int, winds: list[float], seeds: int, frames: int) -> dict[str, Any]:
-    """Simulate every clip of one grid in a single batch and reduce it to the table."""
+    """Simulate every clip of one grid in a single batch and reduce it to effect sizes."""
     substeps = substeps_for(nu, nv)
     sim = make_simulator(grid_u=nu, grid_v=nv, substeps=substeps, n_frames=frames)
     jobs: list[tuple[float, str, str]] = []
     params: list[dict[str, float]] = []
     for wind in winds:
-        jobs.append((wind, "base", ""))
-        params.append({"wind_speed": wind})
         for name, (low, high) in groups(wind).items():
             for level, override in (("low", low), ("high", high)):
                 jobs.append((wind, name, level))
                 params.append({"wind_speed": wind, **override})
-    seed_list = list(range(seeds))
-    all_params = [p for p in params for _ in seed_list]
-    all_seeds = [s for _ in params for s in seed_list]
+    all_params = [p for p in params for _ in range(seeds)]
+    all_seeds = [s for _ in params for s in range(seeds)]
     start = time.perf_counter()
     trajs = sim.simulate_batch(all_params, seeds=all_seeds)
     elapsed = time.perf_counter() - start
-    desc = [motion_descriptor(t) for t in trajs]
-    by_job = {job: desc[k * seeds:(k + 1) * seeds] for k, job in enumerate(jobs)}
+    feats = [clip_features(t) for t in trajs]
+    by_job = {job: feats[k * seeds:(k + 1) * seeds] for k, job in enumerate(jobs)}
     table: dict[str, Any] = {}
     for wind in winds:
-        noise = mean_distance(by_job[(wind, "base", "")], by_job[(wind, "base", "")], same=True)
         rows = {}
         for name in groups(wind):
-            effect = mean_distance(by_job[(wind, name, "low")], by_job[(wind, name, "high")], same=False)
-            ratio = {m: effect[m] / max(noise[m], 1e-12) for m in METRICS}
-            rows[name] = {"effect": effect, "ratio": ratio, "score": float(np.mean(list(ratio.values())))}
-        table[f"{wind:g} m/s"] = {"noise": noise, "groups": rows}
+            low, high = by_job[(wind, name, "low")], by_job[(wind, name, "high")]
+            d = {f: effect_size([x[f] for x in low], [x[f] for x in high]) for f in FEATURES}
+            means = {f: [float(np.mean([x[f] for x in low])), float(np.mean([x[f] for x in high]))]
+                     for f in FEATURES}
+            rows[name] = {"d": {f: round(v, 2) for f, v in d.items()}, "max_d": round(max(d.values()), 2),
+                          "means_low_high": means}
+        table[f"{wind:g} m/s"] = rows
     print(f"grid {nu}x{nv}: {len(trajs)} clips in {elapsed:.1f} s", file=sys.stderr, flush=True)
     return {
         "spacing_m": max(sim.config.width / (nu - 1), sim.config.height / (nv - 1)),
@@ -152,6 +141,8 @@ def measure_chaos(winds: list[float], seeds: int, frames: int) -> dict[str, Any]
 def main(argv: list[str] | None = None) -> None:
     """Run the sensitivity study and print one JSON object."""
     args = parse_args(argv)
+    if args.seeds < 2:
+        raise SystemExit("--seeds must be at least 2 (the spread over seeds is the yardstick)")
     winds = [float(w) for w in args.winds.split(",")]
     result: dict[str, Any] = {
         "benchmark": "cloth_sensitivity",
@@ -159,11 +150,13 @@ def main(argv: list[str] | None = None) -> None:
         "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "seeds": args.seeds,
         "frames": args.frames,
+        "features": list(FEATURES),
         "grids": {},
     }
     for grid in args.grids.split(","):
-        nu, nv = (int(n) for n in grid.lower().split("x"))
-        result["grids"][f"{nu}x{nv}"] = measure_grid(nu, nv, winds, args.seeds, args.frames)
+        if grid:
+            nu, nv = (int(n) for n in grid.lower().split("x"))
+            result["grids"][f"{nu}x{nv}"] = measure_grid(nu, nv, winds, args.seeds, args.frames)
     if args.chaos_seeds > 0:
         chaos_winds = [float(w) for w in args.chaos_winds.split(",")]
         result["chaos"] = measure_chaos(chaos_winds, args.chaos_seeds, args.frames)

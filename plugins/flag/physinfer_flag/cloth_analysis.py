@@ -2,10 +2,9 @@
 
 The flag's motion is chaotic, so single trajectories are compared through statistics:
 the flapping frequency at the fly edge (power spectra averaged over several fly-edge
-points and records, cross-checked by the zero-crossing rate), the kinetic energy, and a
-motion descriptor on a common lattice of material points (time-mean shape, amplitude
-and spectral centroid per point, plus the mean fold angle) that lets clips from different
-grids be compared.
+points and records, cross-checked by the zero-crossing rate), the kinetic energy, the
+fold (dihedral) angles, and a few scalar clip features whose spread over seeds measures
+how far apart two parameter settings are (Cohen's d).
 All functions take :class:`~physinfer.types.Trajectory` objects from the flag simulator
 (with ``extras["grid_shape"]`` = ``(nv, nu)``) and assume the wind blows along +x, so the
 cross-wind (flapping) direction is y.
@@ -14,7 +13,6 @@ cross-wind (flapping) direction is y.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -108,60 +106,37 @@ def mean_fold_angle(traj: Trajectory) -> float:
     return float(np.abs(dihedral_angles(traj.vertices, hinges)).mean())
 
 
-@dataclass(frozen=True)
-class MotionDescriptor:
-    """Statistics of one clip on a lattice of ``P`` material points.
-
-    Attributes:
-        mean_shape: ``(P, 3)`` time-mean positions in metres.
-        amplitude: ``(P,)`` RMS displacement from the mean, metres.
-        centroid: ``(P,)`` spectral centroid of the displacement in Hz.
-        fold: Mean absolute dihedral angle of the whole mesh, radians (fine-scale folding,
-            which bending controls and shading shows).
-    """
-
-    mean_shape: np.ndarray
-    amplitude: np.ndarray
-    centroid: np.ndarray
-    fold: float
+#: Names of the scalar clip features, in the order :func:`clip_features` returns them.
+FEATURES = ("reach", "height", "amplitude", "frequency", "fold")
 
 
-def motion_descriptor(traj: Trajectory, lattice: tuple[int, int] = (11, 16), f_min: float = 0.2) -> MotionDescriptor:
-    """Descriptor of a clip on a ``(rows, cols)`` lattice of material points.
+def clip_features(traj: Trajectory) -> dict[str, float]:
+    """Scalar statistics of one clip, the quantities a viewer (or an embedding) can see.
 
-    Lattice point ``(r, c)`` is the grid node nearest to ``v = r / (rows - 1)``,
-    ``u = c / (cols - 1)``; on grids with ``(nv - 1)`` a multiple of ``rows - 1`` and
-    ``(nu - 1)`` of ``cols - 1`` (16×11, 31×21, 46×31... for the default) the points are
-    exact, elsewhere within half a cell.
-
-    Raises:
-        UserInputError: when the lattice is finer than the grid.
+    Returns:
+        ``reach``: mean downwind (x) position of the fly edge, m; ``height``: its mean
+        height, m (a heavy or slack flag droops); ``amplitude``: RMS displacement from
+        the time-mean shape, averaged over all nodes, m; ``frequency``: spectral centroid
+        of the fly edge's cross-wind motion, Hz; ``fold``: mean absolute dihedral angle,
+        rad (how sharply the cloth folds, which bending controls and shading shows).
     """
     grid = grid_vertices(traj).astype(np.float64)
-    nv, nu = grid.shape[1:3]
-    rows, cols = lattice
-    if rows > nv or cols > nu:
-        raise UserInputError(f"a {rows}x{cols} lattice is finer than the {nv}x{nu} grid")
-    r_idx = np.round(np.linspace(0, nv - 1, rows)).astype(int)
-    c_idx = np.round(np.linspace(0, nu - 1, cols)).astype(int)
-    pts = grid[:, r_idx][:, :, c_idx].reshape(traj.n_frames, -1, 3)
-    mean = pts.mean(axis=0)
-    disp = pts - mean
-    amplitude = np.sqrt((disp**2).sum(axis=2).mean(axis=0))
-    window = np.hanning(traj.n_frames)[:, None, None]
-    power = (np.abs(np.fft.rfft(disp * window, axis=0)) ** 2).sum(axis=2)
-    freqs = np.fft.rfftfreq(traj.n_frames, 1.0 / traj.fps)
-    keep = freqs >= f_min
-    centroid = (freqs[keep, None] * power[keep]).sum(axis=0) / np.maximum(power[keep].sum(axis=0), 1e-300)
-    return MotionDescriptor(mean_shape=mean, amplitude=amplitude, centroid=centroid, fold=mean_fold_angle(traj))
-
-
-def descriptor_distance(a: MotionDescriptor, b: MotionDescriptor) -> dict[str, float]:
-    """RMS differences between two descriptors: ``shape`` (m), ``amplitude`` (m),
-    ``centroid`` (Hz), and the absolute difference of ``fold`` (rad)."""
+    fly = grid[:, :, -1]
+    disp = traj.vertices.astype(np.float64) - traj.vertices.mean(axis=0)
     return {
-        "fold": abs(a.fold - b.fold),
-        "shape": float(np.sqrt(((a.mean_shape - b.mean_shape) ** 2).sum(axis=1).mean())),
-        "amplitude": float(np.sqrt(((a.amplitude - b.amplitude) ** 2).mean())),
-        "centroid": float(np.sqrt(((a.centroid - b.centroid) ** 2).mean())),
+        "reach": float(fly[..., 0].mean()),
+        "height": float(fly[..., 2].mean()),
+        "amplitude": float(np.sqrt((disp**2).sum(axis=2).mean())),
+        "frequency": spectral_centroid([fly_edge_crosswind(traj)], traj.fps),
+        "fold": mean_fold_angle(traj),
     }
+
+
+def effect_size(low: Sequence[float], high: Sequence[float]) -> float:
+    """Cohen's d: ``|mean(high) - mean(low)|`` over the pooled standard deviation.
+
+    With chaotic clips, ``d > 1`` means a single clip mostly tells the two settings apart.
+    """
+    low, high = np.asarray(low, float), np.asarray(high, float)
+    pooled = np.sqrt(0.5 * (low.var(ddof=1) + high.var(ddof=1)))
+    return float(abs(high.mean() - low.mean()) / max(pooled, 1e-12))

@@ -39,6 +39,11 @@ from physinfer_flag.material import (
 
 #: Gap between the flag's top hoist corner and the top of the pole, metres.
 POLE_CAP = 0.05
+#: Automatic time step: ``REFERENCE_DT`` at ``REFERENCE_SPACING``, proportional to the grid
+#: spacing (the explicit limit of the membrane waves). 1/1200 s at 5 cm keeps a margin of
+#: about 1.4 over the smallest step that blew up across the parameter space (docs).
+REFERENCE_DT = 1.0 / 1200.0
+REFERENCE_SPACING = 0.05
 
 
 def flag_parameter_space() -> ParameterSpace:
@@ -80,7 +85,9 @@ class FlagSimConfig:
         n_frames: Recorded frames.
         fps: Output frame rate in Hz.
         warmup_s: Simulated seconds from rest before recording starts (rounded to frames).
-        substeps: Integration steps per output frame; ``dt = 1 / (fps · substeps)``.
+        substeps: Integration steps per output frame, ``dt = 1 / (fps · substeps)``;
+            ``None`` chooses them from the grid spacing (48 at the default 5 cm grid and
+            25 fps, proportionally more on finer grids), see :attr:`steps_per_frame`.
         rho_air: Air density in kg/m³ (normal pressure ``ρ A |v_n| v_n n``).
         c_drag: Tangential drag coefficient in kg/(m²·s) (``c A v_t``).
         gravity: Gravitational acceleration in m/s².
@@ -101,7 +108,7 @@ class FlagSimConfig:
     n_frames: int = 60
     fps: float = 25.0
     warmup_s: float = 2.0
-    substeps: int = 48
+    substeps: int | None = None
     rho_air: float = 1.2
     c_drag: float = 0.05
     gravity: float = 9.81
@@ -122,7 +129,8 @@ class FlagSimConfig:
             (1 <= self.n_frames <= 100_000, f"n_frames must be in [1, 100000], got {self.n_frames}"),
             (0 < self.fps <= 1000, f"fps must be in (0, 1000], got {self.fps}"),
             (0 <= self.warmup_s <= 600, f"warmup_s must be in [0, 600] s, got {self.warmup_s}"),
-            (1 <= self.substeps <= 100_000, f"substeps must be in [1, 100000], got {self.substeps}"),
+            (self.substeps is None or 1 <= self.substeps <= 100_000,
+             f"substeps must be None (automatic) or in [1, 100000], got {self.substeps}"),
             (self.rho_air >= 0, f"rho_air must be >= 0 kg/m^3, got {self.rho_air}"),
             (self.c_drag >= 0, f"c_drag must be >= 0, got {self.c_drag}"),
             (self.gravity >= 0, f"gravity must be >= 0, got {self.gravity}"),
@@ -140,9 +148,22 @@ class FlagSimConfig:
             raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
 
     @property
+    def spacing(self) -> float:
+        """Largest grid spacing in metres."""
+        return max(self.width / (self.grid_u - 1), self.height / (self.grid_v - 1))
+
+    @property
+    def steps_per_frame(self) -> int:
+        """``substeps``, or the automatic choice: ``dt`` ≤ 1/1200 s × spacing / 5 cm."""
+        if self.substeps is not None:
+            return int(self.substeps)
+        dt_max = REFERENCE_DT * min(self.spacing, REFERENCE_SPACING) / REFERENCE_SPACING
+        return max(1, math.ceil(1.0 / (self.fps * dt_max) - 1e-9))
+
+    @property
     def dt(self) -> float:
         """Integration step in seconds."""
-        return 1.0 / (self.fps * self.substeps)
+        return 1.0 / (self.fps * self.steps_per_frame)
 
     @property
     def warmup_frames(self) -> int:
@@ -195,7 +216,7 @@ class FlagSimulator(Simulator):
             damping=c.damping, strain_limit=c.strain_limit,
         )
         self.solver = ClothSolver(
-            mesh=self.mesh, material=self.material, physics=physics, substeps=c.substeps,
+            mesh=self.mesh, material=self.material, physics=physics, substeps=c.steps_per_frame,
             perturbation=c.perturbation_m,
         )
         self._extras = {

@@ -8,12 +8,13 @@ import pytest
 from physinfer.errors import UserInputError
 from physinfer.types import Trajectory
 from physinfer_flag.cloth_analysis import (
-    descriptor_distance,
+    FEATURES,
+    clip_features,
     dominant_frequency,
+    effect_size,
     fly_edge_crosswind,
     kinetic_energy,
     mean_fold_angle,
-    motion_descriptor,
     spectral_centroid,
     zero_crossing_rate,
 )
@@ -51,13 +52,21 @@ def test_flat_sheet_has_no_folds_and_a_wave_has_some():
     assert mean_fold_angle(waving_sheet(2.0, amp=0.3)) > 0.01
 
 
-def test_descriptor_compares_across_grids():
-    coarse, fine = motion_descriptor(waving_sheet(2.0, nu=16, nv=11)), motion_descriptor(waving_sheet(2.0))
-    dist = descriptor_distance(coarse, fine)
-    assert dist["shape"] < 1e-6 and dist["amplitude"] < 1e-6 and dist["centroid"] < 1e-6
-    other = motion_descriptor(waving_sheet(4.0))
-    assert descriptor_distance(fine, other)["centroid"] > 1.0
-    nearest = descriptor_distance(fine, motion_descriptor(waving_sheet(2.0, nu=37, nv=25)))
-    assert nearest["shape"] < 0.03  # lattice points within half a cell
-    with pytest.raises(UserInputError, match="lattice"):
-        motion_descriptor(waving_sheet(2.0, nu=10, nv=11))
+def test_clip_features_of_a_known_wave():
+    feats = clip_features(waving_sheet(2.0))
+    assert tuple(feats) == FEATURES
+    assert feats["reach"] == pytest.approx(1.5)
+    assert feats["height"] == pytest.approx(2.5)
+    assert feats["frequency"] == pytest.approx(2.0, abs=0.3)
+    assert 0.0 < feats["amplitude"] < 0.1 and feats["fold"] > 0.0
+
+
+def test_effect_size():
+    assert effect_size([1.0, 2.0, 3.0], [1.0, 2.0, 3.0]) == 0.0
+    assert effect_size([0.0, 1.0], [10.0, 11.0]) == pytest.approx(10 / np.sqrt(0.5))
+
+
+def test_grid_needs_the_flag_extras():
+    traj = waving_sheet(1.0)
+    with pytest.raises(UserInputError, match="grid_shape"):
+        fly_edge_crosswind(Trajectory(traj.vertices, traj.faces, 25.0))

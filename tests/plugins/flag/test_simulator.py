@@ -98,6 +98,13 @@ def test_config_round_trips_through_a_dict():
     assert config.warmup_frames == 50 and config.duration == pytest.approx(4.4)
 
 
+def test_automatic_substeps_follow_the_grid_spacing():
+    assert FlagSimConfig().steps_per_frame == 48
+    assert FlagSimConfig(grid_u=61, grid_v=41).steps_per_frame == 96
+    assert FlagSimConfig(grid_u=16, grid_v=11).steps_per_frame == 48  # never coarser than 1/1200 s
+    assert FlagSimConfig(substeps=30).steps_per_frame == 30
+
+
 # -- trajectory conventions ----------------------------------------------------------------
 
 
