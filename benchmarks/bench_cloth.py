@@ -65,6 +65,17 @@ def log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
+def machine() -> str:
+    """CPU model and count, for the record."""
+    model = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{platform.machine()}, {os.cpu_count()} CPUs, {model}"
+
+
 def first_call_seconds(cache_dir: str | None) -> float:
     """First-call latency in a fresh interpreter (``cache_dir``: a private numba cache)."""
     env = dict(os.environ)
@@ -114,7 +125,7 @@ def measure_ours(batch: int, repeats: int) -> dict[str, Any]:
         "triangles": int(sim.mesh.faces.shape[0]),
         "hinges": int(sim.mesh.hinges.shape[0]),
         "dt_s": sim.config.dt,
-        "substeps_per_frame": sim.config.substeps,
+        "substeps_per_frame": sim.config.steps_per_frame,
         "simulated_s_per_clip": sim_seconds,
         "clip_s_single": round(clip_s, 4),
         "clip_s_single_all": [round(t, 4) for t in times],
@@ -188,7 +199,8 @@ def main(argv: list[str] | None = None) -> None:
     result: dict[str, Any] = {
         "benchmark": "cloth",
         "date": datetime.date.today().isoformat(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.processor() or 'unknown CPU'}",
+        "machine": machine(),
+        "load_average_1min": round(os.getloadavg()[0], 2),
     }
     if not args.skip_compile:
         with tempfile.TemporaryDirectory() as cache:

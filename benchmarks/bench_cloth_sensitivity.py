@@ -13,12 +13,16 @@ clip mostly tells the two settings apart; ``max_d`` is the most telling feature.
 
 With ``--chaos-seeds N`` it also measures the chaos itself at the default grid: the
 dominant flapping frequency (fly-edge spectrum, five points) of single 60-frame clips of
-the same θ over ``N`` seeds, per wind speed.
+the same θ over ``N`` seeds, per wind speed. With ``--frequency-seeds N`` it measures the
+flapping frequency against wind speed on long records (``--frequency-seconds``): the peak
+and the centroid of fly-edge spectra averaged over five points and ``N`` seeds, and the
+zero-crossing rate.
 
 Usage::
 
     python benchmarks/bench_cloth_sensitivity.py --grids 16x11,31x21,37x25,46x31 --winds 2,6 --seeds 6
     python benchmarks/bench_cloth_sensitivity.py --grids 31x21 --seeds 6 --chaos-seeds 10
+    python benchmarks/bench_cloth_sensitivity.py --grids "" --frequency-seeds 3
 
 Prints exactly one JSON object on stdout; progress goes to stderr.
 """
@@ -42,6 +46,8 @@ from physinfer_flag.cloth_analysis import (
     dominant_frequency,
     effect_size,
     fly_edge_crosswind,
+    spectral_centroid,
+    zero_crossing_rate,
 )
 from physinfer_flag.material import BEND_DIRECTIONS_DEG, bending_parameter_names
 from physinfer_flag.simulator import FlagSimConfig, make_simulator
@@ -56,6 +62,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--frames", type=int, default=60, help="recorded frames per clip")
     parser.add_argument("--chaos-seeds", type=int, default=0, help="seeds of the chaos study (0: skip)")
     parser.add_argument("--chaos-winds", default="2,4,6,8,10", help="wind speeds of the chaos study")
+    parser.add_argument("--frequency-seeds", type=int, default=0, help="seeds of the frequency study (0: skip)")
+    parser.add_argument("--frequency-seconds", type=float, default=8.0, help="record length of the frequency study")
+    parser.add_argument("--frequency-winds", default="1,2,3,4,6,8,10", help="wind speeds of the frequency study")
     return parser.parse_args(argv)
 
 
@@ -78,7 +87,7 @@ def substeps_for(nu: int, nv: int) -> int:
     default = FlagSimConfig()
     h = max(default.width / (nu - 1), default.height / (nv - 1))
     h0 = max(default.width / (default.grid_u - 1), default.height / (default.grid_v - 1))
-    return int(math.ceil(default.substeps * h0 / h))
+    return int(math.ceil(default.steps_per_frame * h0 / h - 1e-9))
 
 
 def measure_grid(nu: int, nv: int, winds: list[float], seeds: int, frames: int) -> dict[str, Any]:
@@ -138,6 +147,25 @@ def measure_chaos(winds: list[float], seeds: int, frames: int) -> dict[str, Any]
     return {"seeds": seeds, "frames": frames, "winds": out}
 
 
+def measure_frequency(winds: list[float], seeds: int, seconds: float) -> dict[str, Any]:
+    """Flapping frequency against wind speed from long records at the default grid."""
+    sim = make_simulator(n_frames=int(round(seconds * FlagSimConfig().fps)))
+    fps = sim.config.fps
+    trajs = sim.simulate_batch([{"wind_speed": w} for w in winds for _ in range(seeds)],
+                               seeds=[s for _ in winds for s in range(seeds)])
+    out = {}
+    for k, wind in enumerate(winds):
+        sig = [fly_edge_crosswind(t) for t in trajs[k * seeds:(k + 1) * seeds]]
+        out[f"{wind:g} m/s"] = {
+            "dominant_hz": round(dominant_frequency(sig, fps), 3),
+            "centroid_hz": round(spectral_centroid(sig, fps), 3),
+            "zero_crossing_hz": round(zero_crossing_rate(sig, fps), 3),
+            "rms_crosswind_m": round(float(np.sqrt(np.mean([np.mean(x**2) for x in sig]))), 4),
+        }
+    print(f"frequency: {len(trajs)} records", file=sys.stderr, flush=True)
+    return {"seeds": seeds, "seconds": seconds, "winds": out}
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run the sensitivity study and print one JSON object."""
     args = parse_args(argv)
@@ -160,6 +188,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.chaos_seeds > 0:
         chaos_winds = [float(w) for w in args.chaos_winds.split(",")]
         result["chaos"] = measure_chaos(chaos_winds, args.chaos_seeds, args.frames)
+    if args.frequency_seeds > 0:
+        freq_winds = [float(w) for w in args.frequency_winds.split(",")]
+        result["frequency"] = measure_frequency(freq_winds, args.frequency_seeds, args.frequency_seconds)
     print(json.dumps(result, indent=1))
 
 

@@ -248,7 +248,7 @@ def test_no_wind_settles_over_twenty_seconds():
 def test_no_blow_up_for_fifty_random_parameter_sets(sim):
     space = sim.parameter_space
     units = np.random.default_rng(50).uniform(-1, 1, (50, 17))
-    units[:2] = [-1.0, 1.0]
+    units[0], units[1] = -1.0, 1.0
     trajs = sim.simulate_batch([space.from_unit(u) for u in units], seeds=list(range(50)))
     assert all(t.is_finite() for t in trajs)
 
@@ -276,18 +276,20 @@ def test_flapping_frequency_rises_with_wind_long_records():
 
 
 @pytest.mark.slow
-def test_stiffening_one_direction_stiffens_those_hinges():
+def test_each_direction_stiffens_its_own_folds():
+    """Multiplying one direction's five samples by 10 reduces the folding of the hinges of
+    that direction (0°, 45°, 90° to the warp) more than of the other two."""
     sim = make_simulator(n_frames=100)
     direction = sim.mesh.hinge_direction
-    names90 = [n for n in BEND if n.startswith("bend_90deg")]
-    params = [{"wind_speed": 3.0}, {"wind_speed": 3.0, **{n: 10.0 for n in names90}}]
     seeds = [0, 1, 2]
-    trajs = sim.simulate_batch([p for p in params for _ in seeds], seeds=seeds * 2)
+    settings = [{}] + [{n: 10.0 for n in BEND if n.startswith(f"bend_{d}deg")} for d in (0, 45, 90)]
+    trajs = sim.simulate_batch([{"wind_speed": 2.0, **o} for o in settings for _ in seeds], seeds=seeds * 4)
     folds = []
-    for k in range(2):
-        theta = np.concatenate([np.abs(dihedral_angles(t.vertices, sim.mesh.hinges)) for t in trajs[k * 3:(k + 1) * 3]])
-        folds.append([theta[:, np.isclose(direction, d)].mean() for d in (0.0, 2.0)])
-    base, stiff = np.array(folds[0]), np.array(folds[1])
-    # The 90° hinges fold clearly less; the 0° hinges change less.
-    assert stiff[1] < 0.85 * base[1]
-    assert stiff[1] / base[1] < stiff[0] / base[0]
+    for k in range(len(settings)):
+        theta = np.concatenate([np.abs(dihedral_angles(t.vertices, sim.mesh.hinges))
+                                for t in trajs[k * 3:(k + 1) * 3]])
+        folds.append(np.array([theta[:, np.isclose(direction, row)].mean() for row in (0.0, 1.0, 2.0)]))
+    for row in range(3):
+        ratio = folds[row + 1] / folds[0]
+        others = np.delete(ratio, row)
+        assert ratio[row] < 0.9 and ratio[row] < others.min(), (row, ratio)
