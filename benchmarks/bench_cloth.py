@@ -29,6 +29,7 @@ Prints exactly one JSON object on stdout; progress goes to stderr.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import json
 import os
@@ -215,7 +216,9 @@ def main(argv: list[str] | None = None) -> None:
         warp_fields["warp_error"] = "skipped (--skip-warp)"
     else:
         try:
-            warp_fields.update(measure_warp(FlagSimConfig(), args.batch, args.warp_seconds))
+            # Warp prints its notices on stdout; keep stdout for the one JSON object.
+            with contextlib.redirect_stdout(sys.stderr):
+                warp_fields.update(measure_warp(FlagSimConfig(), args.batch, args.warp_seconds))
             warp_fields["ratio_vs_warp"] = round(result["ms_per_sim_s_batched"] / warp_fields["warp_ms_per_sim_s"], 3)
         except Exception as exc:  # any failure of the optional dependency is reported, not raised
             warp_fields["warp_error"] = f"{type(exc).__name__}: {exc}"

@@ -22,6 +22,7 @@ from physinfer_flag.cloth_kernels import (
     S_C_DRAG,
     S_DT,
     S_GRAVITY,
+    S_LIMIT_SWEEPS,
     S_LOOKUP_EVERY,
     S_MAX_DIST,
     S_MAX_SPEED,
@@ -57,6 +58,8 @@ class ClothPhysics:
         damping: Kelvin–Voigt damping time β in seconds of the stretching stress
             (``S = C : (G + β Ġ)``); damps in-plane ringing, not flapping.
         strain_limit: Largest edge stretch kept by strain limiting (0.1 = 10 %); 0 turns it off.
+        strain_limit_sweeps: Gauss–Seidel sweeps of strain limiting per step (more pull
+            the edges next to pinned corners closer to the limit).
         max_speed: A node faster than this (m/s) marks the run as blown up.
         max_distance_factor: A node farther from the pole than this many flag diagonals
             marks the run as blown up.
@@ -71,6 +74,7 @@ class ClothPhysics:
     c_drag: float = 0.05
     damping: float = 2e-4
     strain_limit: float = 0.0
+    strain_limit_sweeps: int = 1
     max_speed: float = 80.0
     max_distance_factor: float = 2.0
     lookup_interval: float = 0.005
@@ -84,6 +88,8 @@ class ClothPhysics:
             (self.c_drag >= 0, f"c_drag must be >= 0, got {self.c_drag}"),
             (0 <= self.damping <= 0.01, f"damping must be in [0, 0.01] s, got {self.damping}"),
             (0 <= self.strain_limit < 1, f"strain_limit must be in [0, 1), got {self.strain_limit}"),
+            (1 <= self.strain_limit_sweeps <= 100,
+             f"strain_limit_sweeps must be in [1, 100], got {self.strain_limit_sweeps}"),
             (self.max_speed > 0, f"max_speed must be positive, got {self.max_speed}"),
             (self.max_distance_factor > 1, f"max_distance_factor must exceed 1, got {self.max_distance_factor}"),
             (0 <= self.lookup_interval <= 0.05, f"lookup_interval must be in [0, 0.05] s, got {self.lookup_interval}"),
@@ -151,6 +157,7 @@ class ClothSolver:
         self._scalars[S_MAX_SPEED] = physics.max_speed
         self._scalars[S_MAX_DIST] = physics.max_distance_factor * diagonal
         self._scalars[S_LOOKUP_EVERY] = max(1, round(physics.lookup_interval / physics.dt))
+        self._scalars[S_LIMIT_SWEEPS] = physics.strain_limit_sweeps
         # Rest-shape factors of the bending kernel (see add_bending_forces).
         self._hinge_curvature = mesh.hinge_length / (10.0 * mesh.hinge_area)
         self._hinge_shape = mesh.hinge_length**2 / (4.0 * mesh.hinge_area)

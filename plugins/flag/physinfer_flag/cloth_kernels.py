@@ -12,7 +12,7 @@ runs ``B`` flags in parallel threads (one flag per thread, no shared writes). Pe
    linear stiffness in half-curvature);
 3. symplectic Euler: ``v += dt · a``, ``x += dt · v``; pinned nodes never move;
 4. optional strain limiting (Provot): edges longer than ``(1 + limit)`` rest are pulled
-   back and the correction is added to the velocities.
+   back (one or more Gauss–Seidel sweeps) and the correction is added to the velocities.
 
 Arrays are float64 (state) and int32 (indices); shapes are documented per function.
 ``fastmath`` is enabled without the no-NaN/no-inf assumptions, so blow-up checks work.
@@ -31,8 +31,9 @@ from physinfer_flag.cloth_wind import shear_factor, wind_at_time
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 # Indices into the ``scalars`` vector of the kernels.
-S_DT, S_GRAVITY, S_RHO_AIR, S_C_DRAG, S_BETA, S_STRAIN_LIMIT, S_MAX_SPEED, S_MAX_DIST, S_LOOKUP_EVERY = range(9)
-N_SCALARS = 9
+(S_DT, S_GRAVITY, S_RHO_AIR, S_C_DRAG, S_BETA, S_STRAIN_LIMIT, S_MAX_SPEED, S_MAX_DIST, S_LOOKUP_EVERY,
+ S_LIMIT_SWEEPS) = range(10)
+N_SCALARS = 10
 
 STATUS_OK, STATUS_NAN, STATUS_SPEED, STATUS_DISTANCE = 0, 1, 2, 3
 
@@ -465,7 +466,7 @@ def run_flag(
         wind_scalars: ``[sample dt, z_ref, base direction]``.
         scalars: ``(N_SCALARS,)`` ``[dt, gravity, rho_air, c_drag, beta, strain limit
             (<= 0: off), max speed, max distance, steps between stretching-stiffness
-            look-ups]``.
+            look-ups, strain-limiting sweeps per step]``.
         substeps: Integration steps per output frame.
         warmup_frames: Frames simulated before recording.
         out: ``(T, V, 3)`` float32, receives the positions at the end of each recorded frame.
@@ -482,6 +483,7 @@ def run_flag(
     max_speed = scalars[S_MAX_SPEED]
     max_dist = scalars[S_MAX_DIST]
     lookup_every = max(int(scalars[S_LOOKUP_EVERY]), 1)
+    limit_sweeps = max(int(scalars[S_LIMIT_SWEEPS]), 1)
     sample_dt = wind_scalars[0]
     z_ref = wind_scalars[1]
     base_dir = wind_scalars[2]
@@ -516,7 +518,8 @@ def run_flag(
                 x[i, 1] += dt * v[i, 1]
                 x[i, 2] += dt * v[i, 2]
             if strain_limit > 0.0:
-                limit_strain(x, v, inv_mass, edges, edge_length, strain_limit, dt)
+                for _ in range(limit_sweeps):
+                    limit_strain(x, v, inv_mass, edges, edge_length, strain_limit, dt)
             step += 1
         status = frame_status(x, v, max_speed, max_dist)
         if status != STATUS_OK:

@@ -130,6 +130,18 @@ def test_trajectory_conventions(sim):
     np.testing.assert_array_equal(traj.extras["grid_shape"], [c.grid_v, c.grid_u])
 
 
+def test_corner_pinning_holds_only_the_corners_and_limits_strain():
+    sim = make_simulator(pin_mode="corners", n_frames=20)
+    traj = sim.simulate({"wind_speed": 10.0, "area_weight": 0.1})
+    hoist = grid_vertices(traj)[:, :, 0]
+    np.testing.assert_allclose(hoist[:, [0, -1], :2], 0.0, atol=1e-6)
+    assert np.abs(hoist[:, 1:-1, :2]).max() > 0.02  # the rest of the hoist edge is free
+    edges = sim.mesh.edges
+    stretch = np.linalg.norm(traj.vertices[:, edges[:, 1]] - traj.vertices[:, edges[:, 0]], axis=-1)
+    stretch /= sim.mesh.edge_length
+    assert np.percentile(stretch, 99) < 1.08 and stretch.max() < 1.2
+
+
 def test_wind_direction_setting_turns_the_flag():
     sim = make_simulator(wind_direction_deg=90.0, n_frames=10)
     traj = sim.simulate({"wind_speed": 6.0})
