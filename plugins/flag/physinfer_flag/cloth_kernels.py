@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from physinfer_flag import cloth_numba  # noqa: F401 - picks numba's cache directory first
 from physinfer_flag.cloth_wind import shear_factor, wind_at_time
 
 # Fast math minus "nnan"/"ninf": NaN tests must survive optimisation.

@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from physinfer.roles import Effect
+from physinfer_flag import cloth_numba  # noqa: F401 - picks numba's cache directory first
 
 #: Default spacing of wind samples in seconds (fine enough for gusts of a few Hz).
 WIND_SAMPLE_DT = 0.01
