@@ -268,21 +268,43 @@ class FlagSimulator(Simulator):
         """Simulate ``B`` flags in parallel compiled threads (numba); same results as :meth:`simulate`.
 
         Raises:
-            SimulationFailed: if any flag fails; the message lists the failed indices.
+            SimulationFailed: if any flag fails; the message lists the failed indices
+                (:meth:`simulate_batch_partial` returns the others instead).
         """
+        trajs, failures = self._run_batch(params, seeds)
+        if failures:
+            details = "; ".join(f"#{b}: {msg}" for b, msg in failures)
+            raise SimulationFailed(f"{len(failures)} of {len(trajs)} flags failed: {details}")
+        return [t for t in trajs if t is not None]
+
+    def simulate_batch_partial(self, params: Sequence[Params], *, seeds: Sequence[int]) -> list[Trajectory | None]:
+        """Like :meth:`simulate_batch`, but a failed flag gives ``None`` instead of an exception.
+
+        For dataset generation: one blow-up does not cost the rest of the batch.
+        """
+        return self._run_batch(params, seeds)[0]
+
+    def _run_batch(
+        self, params: Sequence[Params], seeds: Sequence[int]
+    ) -> tuple[list[Trajectory | None], list[tuple[int, str]]]:
         if len(params) != len(seeds):
             raise UserInputError(f"got {len(params)} parameter sets but {len(seeds)} seeds")
         if not params:
-            return []
+            return [], []
         runs = [self.flag_run(p, seed=s) for p, s in zip(params, seeds, strict=True)]
         vertices, status = self.solver.run_batch(
             runs, warmup_frames=self.config.warmup_frames, n_frames=self.config.n_frames
         )
-        failed = [(b, int(st), int(fr)) for b, (st, fr) in enumerate(status) if st != 0]
-        if failed:
-            details = "; ".join(f"#{b}: {self.solver.failure_message(st, fr)}" for b, st, fr in failed)
-            raise SimulationFailed(f"{len(failed)} of {len(runs)} flags failed: {details}")
-        return [self._trajectory(vertices[b]) for b in range(len(runs))]
+        trajs: list[Trajectory | None] = []
+        failures: list[tuple[int, str]] = []
+        for b in range(len(runs)):
+            code, frame = int(status[b, 0]), int(status[b, 1])
+            if code == 0 and np.isfinite(vertices[b]).all():
+                trajs.append(self._trajectory(vertices[b]))
+            else:
+                trajs.append(None)
+                failures.append((b, self.solver.failure_message(code, frame) if code else "produced NaN"))
+        return trajs, failures
 
     def _trajectory(self, vertices: np.ndarray) -> Trajectory:
         if not np.isfinite(vertices).all():

@@ -171,6 +171,15 @@ def test_blow_up_raises_simulation_failed():
                                  {"wind_speed": 9.0, "area_weight": 0.1}], seeds=[0, 0])
 
 
+def test_partial_batch_keeps_the_flags_that_did_not_fail():
+    sim = make_simulator(n_frames=5, warmup_s=0.4)
+    unstable = make_simulator(n_frames=5, warmup_s=0.4, substeps=8)
+    good = sim.simulate_batch_partial([{"wind_speed": 3.0}], seeds=[0])
+    assert good[0] is not None and good[0].is_finite()
+    mixed = unstable.simulate_batch_partial([{"wind_speed": 9.0, "area_weight": 0.1}], seeds=[0])
+    assert mixed == [None]
+
+
 # -- effects plug into the wind --------------------------------------------------------------
 
 
