@@ -143,7 +143,9 @@ def test_gradients_flow_through_the_fused_front_end_to_its_input():
     video = random_smooth_video(n=1).requires_grad_(True)
     fused = SpectralFrontEnd(config=SMALL)(video)
     fused[:, :2].sum().backward()
-    assert video.grad is not None and torch.isfinite(video.grad).all() and video.grad.abs().sum() > 0
+    assert (
+        video.grad is not None and torch.isfinite(video.grad).all() and video.grad.abs().sum() > 0
+    )
     reference = random_smooth_video(n=1).requires_grad_(True)
     ReferenceFrontEnd(config=SMALL)(reference)[:, :2].sum().backward()
     torch.testing.assert_close(video.grad, reference.grad, rtol=1e-3, atol=1e-6)
