@@ -118,8 +118,6 @@ def refine(
         "truth": target.truth,
         "overwrite": overwrite,
     }
-    if not resume:
-        _refuse_clobber(run_dir, overwrite)
     factory = registry.get("optimizers", optimizer).load()
     with _progress(budget, enabled=progress) as on_trial:
         result = run_refinement(
@@ -131,14 +129,6 @@ def refine(
     write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()
     return result
-
-
-def _refuse_clobber(run_dir: RunDirectory, overwrite: bool) -> None:
-    if run_dir.run_file.exists() and not overwrite:
-        raise UserInputError(
-            f"{run_dir.path} already holds a run; continue it with --resume, choose another --out, "
-            "or pass --overwrite to start over"
-        )
 
 
 class _progress:

@@ -1,5 +1,4 @@
 import json
-import os
 import subprocess
 import sys
 import time
@@ -96,7 +95,3 @@ def test_unreadable_and_too_short_targets(tmp_path):
     assert proc.returncode == 2
     assert "too short" in proc.stderr and "needs at least 100 frames" in " ".join(proc.stderr.split())
     assert not (tmp_path / "r").exists(), "a refused target must leave no run directory"
-
-
-def test_env_has_no_display_dependency():
-    assert os.environ.get("PYOPENGL_PLATFORM") == "egl"
