@@ -270,18 +270,39 @@ def refine_cmd(
 
 
 def _mount_plugin_commands() -> None:
-    """Add commands registered through ``physinfer_register_commands``; skip broken ones."""
+    """Add commands registered through ``physinfer_register_commands``; skip broken ones.
+
+    A name with a space, ``"evaluate triplets"``, is a subcommand of the group named by its
+    first word; the group is created when no plugin registers it, so several plugins can
+    contribute subcommands to one group (``physinfer evaluate triplets|wind|bouman``).
+    """
     registry, infos = registry_and_infos()
+    groups: dict[str, typer.Typer] = {}
     for name, entry in sorted(registry.entries["commands"].items()):
         try:
             obj = entry.load()
         except Exception as exc:  # report, don't break the CLI
             infos[entry.plugin].error = f"command {name!r}: {type(exc).__name__}: {exc}"
             continue
+        parent_name, _, child = name.partition(" ")
+        parent = app
+        if child:
+            parent = groups.get(parent_name) or _new_group(parent_name, groups)
+            name = child
         if isinstance(obj, typer.Typer):
-            app.add_typer(obj, name=name, help=entry.description or None)
+            parent.add_typer(obj, name=name, help=entry.description or None)
+            if parent is app:
+                groups[name] = obj
         else:
-            app.command(name, help=entry.description or None)(obj)
+            parent.command(name, help=entry.description or None)(obj)
+
+
+def _new_group(name: str, groups: dict[str, typer.Typer]) -> typer.Typer:
+    """An empty command group ``physinfer NAME`` for plugin subcommands."""
+    group = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+    app.add_typer(group, name=name, help=f"{name.capitalize()} commands contributed by plugins.")
+    groups[name] = group
+    return group
 
 
 def run() -> None:
