@@ -18,3 +18,20 @@ def physinfer_register_embedders(registry):
     registry.add_embedder(
         "spectral", "physinfer_flag.sdn.embedder:SpectralEmbedder", "SDN front end + pooling (parameter-free, torch)"
     )
+
+
+@hookimpl
+def physinfer_register_commands(registry):
+    registry.add_command(
+        "train", "physinfer_flag.cli:train_cmd", "Train the flag's SDN embedding on a generated dataset."
+    )
+    registry.add_command(
+        "evaluate triplets",
+        "physinfer_flag.cli:evaluate_triplets_cmd",
+        "Triplet accuracy of the SDN (or the spectral baseline) on a dataset's test split.",
+    )
+    registry.add_command(
+        "evaluate wind",
+        "physinfer_flag.cli:evaluate_wind_cmd",
+        "Wind-speed regression (MSE, Acc@0.5) of the SDN or a baseline on a dataset's test split.",
+    )
