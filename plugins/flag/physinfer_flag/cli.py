@@ -63,8 +63,8 @@ def require_plugin(plugin: str, command: str) -> None:
     entry = registry.entries["commands"].get(command)
     providers = sorted({entry.plugin}) if entry is not None else [PLUGIN]
     raise UserInputError(
-        f"`physinfer {command}` is provided for plugin(s) {', '.join(providers)}, not {plugin!r}; "
-        f"use --plugin {providers[0]}"
+        f"--plugin {plugin!r}: `physinfer {command}` is provided by the plugins "
+        f"{', '.join(providers)}; use --plugin {providers[0]}"
     )
 
 
