@@ -35,3 +35,19 @@ def physinfer_register_commands(registry):
         "physinfer_flag.cli:evaluate_wind_cmd",
         "Wind-speed regression (MSE, Acc@0.5) of the SDN or a baseline on a dataset's test split.",
     )
+
+
+@hookimpl
+def physinfer_register_effects(registry):
+    registry.add_effect(
+        "wind_gusts", "physinfer_flag.effects:WindGusts", phenomenon="flag",
+        description="turbulent fluctuation of the wind speed (gusts)",
+    )
+    registry.add_effect(
+        "wind_shear", "physinfer_flag.effects:WindShear", phenomenon="flag",
+        description="vertical wind shear: wind speed rising with height (power law)",
+    )
+    registry.add_effect(
+        "wind_yaw", "physinfer_flag.effects:WindYaw", phenomenon="flag",
+        description="wind direction offset (yaw) from the assumed direction",
+    )
