@@ -10,6 +10,7 @@ continues with ``resume=True``.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -24,7 +25,7 @@ from physinfer.roles import Effect, Embedder, Optimizer, Phenomenon, Renderer, S
 from physinfer.rundir import RunDirectory, TrialRecord
 
 #: run.json keys that must match for ``--resume``.
-RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder")
+RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial")
 
 
 @dataclass(frozen=True)
@@ -35,8 +36,16 @@ class RefineConfig:
         steps: Total number of trials (including the centre trial and resumed ones).
         optimizer: Registered optimizer name.
         seed: Seed of the optimizer and of every simulation (so a θ maps to one clip).
-        noise_sem: Standard error of the distance told to the optimizer (``None``:
-            treat observations as exact / let the optimizer infer the noise).
+        noise_sem: Standard error of the objective told to the optimizer for every
+            observation; ``None``: measured (``noise_samples`` > 0) or inferred by the
+            optimizer.
+        noise_samples: Before optimising, re-simulate the centre θ under this many extra
+            seeds and tell the optimizer the spread of the objective as its standard error
+            (0: do not measure). Ignored when ``noise_sem`` is given.
+        seeds_per_trial: Average the distance of each trial over this many simulation
+            seeds (the run seed first), trading steps for less noise per observation.
+        floor_samples: After the run, re-simulate the best θ under this many seeds and
+            report the noise floor and the gap in ``result.json`` (0: skip).
         log_objective: Tell the optimizer ``log(D)`` instead of ``D``. The minimiser is the
             same, but the landscape is far smoother (distances span orders of magnitude),
             which suits a GP surrogate; results always report ``D`` itself.
@@ -46,6 +55,9 @@ class RefineConfig:
     optimizer: str = "ax"
     seed: int = 0
     noise_sem: float | None = None
+    noise_samples: int = 0
+    seeds_per_trial: int = 1
+    floor_samples: int = 0
     log_objective: bool = True
 
     def objective(self, distance: float | None) -> float | None:
@@ -58,6 +70,20 @@ class RefineConfig:
         """Raise :class:`UserInputError` for a non-positive budget."""
         if self.steps < 1:
             raise UserInputError(f"--steps must be at least 1, got {self.steps}")
+        if self.seeds_per_trial < 1:
+            raise UserInputError(f"--seeds-per-trial must be at least 1, got {self.seeds_per_trial}")
+        if self.noise_samples < 0 or self.noise_samples == 1:
+            raise UserInputError(f"--noise-samples must be 0 or at least 2, got {self.noise_samples}")
+        if self.floor_samples < 0 or self.floor_samples == 1:
+            raise UserInputError(f"--floor-samples must be 0 or at least 2, got {self.floor_samples}")
+        if self.noise_sem is not None and not self.noise_sem >= 0:
+            raise UserInputError(f"the noise standard error must be non-negative, got {self.noise_sem}")
+
+    def trial_seeds(self) -> list[int]:
+        """The seeds every trial is simulated with (the run seed first)."""
+        from physinfer.noise import noise_seeds
+
+        return [self.seed, *noise_seeds(self.seed, self.seeds_per_trial - 1)]
 
 
 @dataclass
@@ -148,11 +174,78 @@ def evaluate(
     return distance, None, timings
 
 
-def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig) -> None:
+def evaluate_mean(
+    pipeline: Pipeline,
+    params: Mapping[str, float],
+    target_embedding: np.ndarray,
+    render_params: Mapping[str, Any],
+    seeds: Sequence[int],
+) -> tuple[float | None, str | None, dict[str, float]]:
+    """:func:`evaluate` under each seed; the mean distance (failed if any seed fails)."""
+    distances, totals = [], {}
+    for seed in seeds:
+        distance, error, timings = evaluate(pipeline, params, target_embedding, render_params, seed)
+        for phase, seconds in timings.items():
+            totals[phase] = totals.get(phase, 0.0) + seconds
+        if distance is None:
+            return None, error, totals
+        distances.append(distance)
+    return float(np.mean(distances)), None, totals
+
+
+def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:
     """Feed logged trials back to a fresh optimizer so it continues where the run stopped."""
     for rec in records:
         trial = optimizer.attach(np.asarray(rec.x, dtype=float))
-        optimizer.tell(trial.index, config.objective(rec.distance), config.noise_sem if rec.distance is not None else None)
+        optimizer.tell(trial.index, config.objective(rec.distance), sem if rec.distance is not None else None)
+
+
+NOISE_PRIOR_FILE = "noise_prior.json"
+
+
+def observation_noise(
+    pipeline: Pipeline,
+    target: Target,
+    target_embedding: np.ndarray,
+    run_dir: RunDirectory,
+    config: RefineConfig,
+) -> float | None:
+    """The standard error told to the optimizer with every observation.
+
+    ``config.noise_sem`` if given; else, with ``noise_samples`` > 0, the spread of the
+    objective over re-simulations of the centre θ (measured once per run and stored in
+    the run directory, so a resumed run tells the optimizer the same); else ``None``.
+    Averaging over ``seeds_per_trial`` seeds divides the spread by their square root.
+    """
+    from physinfer.noise import measure_noise_floor, noise_seeds
+
+    if config.noise_sem is not None:
+        return config.noise_sem
+    if config.noise_samples == 0:
+        return None
+    path = run_dir.path / NOISE_PRIOR_FILE
+    if path.is_file():
+        return json.loads(path.read_text())["sem"]
+    space = pipeline.simulator.parameter_space
+    centre = space.from_unit(np.zeros(len(space)))
+    try:
+        floor = measure_noise_floor(
+            pipeline,
+            centre,
+            target.render_params,
+            seeds=noise_seeds(config.seed + 1, config.noise_samples),
+            target_embedding=target_embedding,
+        )
+    except SimulationFailed:
+        return None  # the centre fails under other seeds: leave the noise to the optimizer
+    if config.log_objective:
+        spread = floor.log_std()
+    else:
+        spread = float(np.std(floor.to_target or floor.pairwise, ddof=1))
+    # A deterministic phenomenon has no spread: leave the (numerical) noise to the optimizer.
+    sem = float(spread / np.sqrt(config.seeds_per_trial)) if np.isfinite(spread) and spread > 1e-9 else None
+    atomic_write_json(path, {"sem": sem, "at": "centre", "log_objective": config.log_objective, **floor.summary()})
+    return sem
 
 
 def run_refinement(
@@ -191,9 +284,12 @@ def run_refinement(
         records = run_dir.read_trials()
     else:
         run_dir.create(run_info, overwrite=bool(run_info.get("overwrite")))
+        (run_dir.path / NOISE_PRIOR_FILE).unlink(missing_ok=True)
         records = []
+    sem = observation_noise(pipeline, target, target_embedding, run_dir, config)
     optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
-    _replay(optimizer, records, config)
+    _replay(optimizer, records, config, sem)
+    seeds = config.trial_seeds()
     best = min((r.distance for r in records if r.distance is not None), default=float("inf"))
 
     for step in range(len(records), config.steps):
@@ -201,9 +297,9 @@ def run_refinement(
         trial = optimizer.attach(np.zeros(len(space))) if step == 0 else optimizer.ask(1)[0]
         t_ask = time.perf_counter() - t0
         params = space.from_unit(trial.x)
-        distance, error, timings = evaluate(pipeline, params, target_embedding, target.render_params, config.seed)
+        distance, error, timings = evaluate_mean(pipeline, params, target_embedding, target.render_params, seeds)
         t1 = time.perf_counter()
-        optimizer.tell(trial.index, config.objective(distance), config.noise_sem if distance is not None else None)
+        optimizer.tell(trial.index, config.objective(distance), sem if distance is not None else None)
         timings["optimizer"] = t_ask + time.perf_counter() - t1
         record = TrialRecord(
             step=step,
@@ -221,7 +317,36 @@ def run_refinement(
             best = min(best, distance)
         if on_trial is not None:
             on_trial(record, best)
-    return summarise(records, space.names, target, run_dir.path, time.perf_counter() - start)
+    result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start)
+    result.extra["observation_sem"] = sem
+    if config.floor_samples:
+        result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
+    return result
+
+
+def final_noise_floor(
+    result: RefineResult,
+    pipeline: Pipeline,
+    target: Target,
+    target_embedding: np.ndarray,
+    config: RefineConfig,
+) -> dict[str, Any] | None:
+    """The noise floor at the best θ: how far its own re-simulations are from each other
+    (``floor``) and from the target (``gap``); ``ratio`` near 1 means the fit is as good as
+    the chaos of the phenomenon allows. ``None`` when the re-simulations fail."""
+    from physinfer.noise import measure_noise_floor, noise_seeds
+
+    try:
+        floor = measure_noise_floor(
+            pipeline,
+            result.best_params,
+            target.render_params,
+            seeds=noise_seeds(config.seed + 2, config.floor_samples),
+            target_embedding=target_embedding,
+        )
+    except SimulationFailed:
+        return None
+    return floor.summary()
 
 
 def summarise(

@@ -92,12 +92,22 @@ def refine(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    noise_samples: int = 3,
+    seeds_per_trial: int = 1,
+    floor_samples: int = 4,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``."""
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     pipeline = build_pipeline(registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device)
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
-    config = RefineConfig(steps=budget, optimizer=optimizer, seed=seed)
+    config = RefineConfig(
+        steps=budget,
+        optimizer=optimizer,
+        seed=seed,
+        noise_samples=noise_samples,
+        seeds_per_trial=seeds_per_trial,
+        floor_samples=floor_samples,
+    )
     config.validate()
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {})
     run_dir = RunDirectory(out)
@@ -117,6 +127,7 @@ def refine(
         "render_params": dict(target.render_params),
         "truth": target.truth,
         "overwrite": overwrite,
+        "seeds_per_trial": seeds_per_trial,
     }
     factory = registry.get("optimizers", optimizer).load()
     with _progress(budget, enabled=progress) as on_trial:

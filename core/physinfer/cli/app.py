@@ -224,6 +224,23 @@ def refine_cmd(
     out: Annotated[Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")] = False,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a finished run in --out.")] = False,
+    noise_samples: Annotated[
+        int,
+        typer.Option(
+            "--noise-samples",
+            help="Re-simulate the centre under this many seeds first and tell the optimizer the "
+            "spread of the distance as its noise (0: let the optimizer infer it).",
+        ),
+    ] = 3,
+    seeds_per_trial: Annotated[
+        int, typer.Option("--seeds-per-trial", help="Average each trial's distance over this many seeds.")
+    ] = 1,
+    floor_samples: Annotated[
+        int,
+        typer.Option(
+            "--floor-samples", help="Re-simulate the best fit under this many seeds to report the noise floor (0: skip)."
+        ),
+    ] = 4,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -252,6 +269,9 @@ def refine_cmd(
         resume=resume,
         overwrite=overwrite,
         progress=True,
+        noise_samples=noise_samples,
+        seeds_per_trial=seeds_per_trial,
+        floor_samples=floor_samples,
     )
     summary = result.summary()
     if as_json:

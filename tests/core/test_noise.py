@@ -1,0 +1,103 @@
+"""The noise floor of the distance, and how the refinement uses it, on a toy stochastic model."""
+
+import json
+
+import numpy as np
+import pytest
+
+from physinfer.errors import UserInputError
+from physinfer.noise import measure_noise_floor, noise_seeds
+from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.refine import Pipeline, RefineConfig, run_refinement
+from physinfer.roles import Embedder, Renderer, Simulator, Target
+from physinfer.rundir import RunDirectory
+from physinfer.types import Clip, Trajectory
+
+SPACE = ParameterSpace([ParameterSpec("a", (0.0, 2.0))])
+
+
+class NoisySimulator(Simulator):
+    """One vertex at height ``a`` plus seed noise of standard deviation ``sigma``."""
+
+    parameter_space = SPACE
+
+    def __init__(self, sigma: float) -> None:
+        self.sigma = sigma
+
+    def simulate(self, params, *, seed=0):
+        rng = np.random.default_rng(seed)
+        z = params["a"] + self.sigma * rng.standard_normal()
+        vertices = np.full((4, 3, 3), z, dtype=np.float32)
+        return Trajectory(vertices=vertices, faces=np.array([[0, 1, 2]], dtype=np.int32), fps=25.0)
+
+
+class PassRenderer(Renderer):
+    default_render_params: dict = {}
+
+    def render(self, trajectory, render_params=None):
+        level = np.clip(trajectory.vertices[:, :1, :1, None] * 100, 0, 255).astype(np.uint8)
+        return Clip(frames=np.broadcast_to(level, (4, 2, 2, 1)).copy(), fps=trajectory.fps)
+
+
+class MeanEmbedder(Embedder):
+    fps, n_frames = 25.0, 4
+
+    def embed(self, clip):
+        return np.array([clip.frames.mean() / 100.0])
+
+
+def pipeline(sigma):
+    return Pipeline(phenomenon=None, simulator=NoisySimulator(sigma), renderer=PassRenderer(), embedder=MeanEmbedder())
+
+
+def test_noise_seeds_are_distinct_deterministic_and_avoid_the_run_seed():
+    seeds = noise_seeds(7, 6)
+    assert len(set(seeds)) == 6 and 7 not in seeds
+    assert seeds == noise_seeds(7, 6) and seeds != noise_seeds(8, 6)
+
+
+def test_floor_grows_with_the_seed_noise_and_gap_with_the_offset():
+    quiet = measure_noise_floor(pipeline(0.01), {"a": 1.0}, {}, seeds=noise_seeds(0, 6))
+    loud = measure_noise_floor(pipeline(0.2), {"a": 1.0}, {}, seeds=noise_seeds(0, 6))
+    assert len(loud.pairwise) == 15 and loud.to_target is None
+    assert loud.floor > 20 * quiet.floor
+    near = measure_noise_floor(pipeline(0.05), {"a": 1.0}, {}, seeds=noise_seeds(0, 6), target_embedding=np.array([1.0]))
+    far = measure_noise_floor(pipeline(0.05), {"a": 1.5}, {}, seeds=noise_seeds(0, 6), target_embedding=np.array([1.0]))
+    assert far.gap > 10 * near.gap
+    summary = far.summary()
+    assert summary["ratio"] > 10 and json.dumps(summary)
+
+
+def test_noise_floor_needs_two_seeds():
+    with pytest.raises(ValueError, match="two seeds"):
+        measure_noise_floor(pipeline(0.1), {"a": 1.0}, {}, seeds=[1])
+
+
+def run(tmp_path, config):
+    target = Target(clip=PassRenderer().render(NoisySimulator(0.0).simulate({"a": 1.3})), truth={"a": 1.3}, render_params={})
+    from physinfer.optimizers.random import RandomOptimizer
+
+    return run_refinement(
+        pipeline(0.05), target, RandomOptimizer, RunDirectory(tmp_path / "run"), config,
+        run_info={"plugin": "toy", "seeds_per_trial": config.seeds_per_trial},
+    )
+
+
+def test_refinement_measures_the_observation_noise_and_reports_the_floor(tmp_path):
+    result = run(tmp_path, RefineConfig(steps=6, optimizer="random", noise_samples=4, floor_samples=4))
+    prior = json.loads((tmp_path / "run" / "noise_prior.json").read_text())
+    assert prior["sem"] > 0 and result.extra["observation_sem"] == prior["sem"]
+    floor = result.extra["noise_floor"]
+    assert floor["n"] == 4 and floor["floor"] > 0 and floor["gap"] > 0
+
+
+def test_seeds_per_trial_averages_and_costs_simulations(tmp_path):
+    result = run(tmp_path, RefineConfig(steps=3, optimizer="random", seeds_per_trial=3))
+    assert "noise_floor" not in result.extra and result.extra["observation_sem"] is None
+    assert RefineConfig(seeds_per_trial=3, seed=5).trial_seeds()[0] == 5
+
+
+@pytest.mark.parametrize("field, value", [("seeds_per_trial", 0), ("noise_samples", 1), ("floor_samples", -1)])
+def test_bad_noise_settings_are_user_errors(field, value):
+    with pytest.raises(UserInputError, match=field.replace("_", "-")):
+        RefineConfig(**{field: value}).validate()
