@@ -10,7 +10,16 @@ from physinfer.errors import PhysinferError, SimulationFailed, UserInputError
 from physinfer.hooks import hookimpl
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.plugins import get_plugin_manager, load_registry
-from physinfer.roles import Effect, Embedder, Optimizer, Phenomenon, Renderer, Simulator, Target, Trial
+from physinfer.roles import (
+    Effect,
+    Embedder,
+    Optimizer,
+    Phenomenon,
+    Renderer,
+    Simulator,
+    Target,
+    Trial,
+)
 from physinfer.types import Clip, Trajectory
 
 __version__ = "0.1.0"

@@ -71,6 +71,26 @@ class Renderer(ABC):
         """A random ζ for dataset variety; the default is the fixed default ζ."""
         return dict(self.default_render_params)
 
+    def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Validate ζ before any simulation runs; returns the complete ζ.
+
+        The default accepts the keys of ``default_render_params`` (and anything when that
+        is empty). Renderers with typed settings override it to check values too.
+
+        Raises:
+            UserInputError: naming an unknown key and the known ones.
+        """
+        from physinfer.errors import UserInputError
+
+        given = dict(render_params or {})
+        known = set(self.default_render_params)
+        unknown = sorted(set(given) - known) if known else []
+        if unknown:
+            raise UserInputError(
+                f"unknown render setting(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+            )
+        return {**self.default_render_params, **given}
+
     def close(self) -> None:  # noqa: B027 - optional hook, no-op by default
         """Release GPU/EGL resources (optional)."""
 

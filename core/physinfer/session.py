@@ -63,13 +63,13 @@ def load_target(
         space[name]  # unknown names fail with the list of known ones
     if target_path is None:
         target = pipeline.phenomenon.default_target()
-        zeta = {**target.render_params, **render_set}
+        zeta = pipeline.renderer.check_render_params({**target.render_params, **render_set})
         merged_truth = {**(target.truth or {}), **truth_values}
         return Target(target.clip, merged_truth or None, zeta, target.description)
     from physinfer.video import read_video
 
+    zeta = pipeline.renderer.check_render_params({**pipeline.renderer.default_render_params, **render_set})
     clip = read_video(target_path, fps=fps)
-    zeta = {**pipeline.renderer.default_render_params, **render_set}
     return Target(clip, truth_values or None, zeta, str(target_path))
 
 

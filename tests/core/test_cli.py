@@ -95,3 +95,13 @@ def test_unreadable_and_too_short_targets(tmp_path):
     assert proc.returncode == 2
     assert "too short" in proc.stderr and "needs at least 100 frames" in " ".join(proc.stderr.split())
     assert not (tmp_path / "r").exists(), "a refused target must leave no run directory"
+
+
+def test_unknown_render_setting_fails_before_simulating(tmp_path):
+    proc = subprocess.run(
+        [str(BIN), "simulate", "--plugin", "pendulum", "--render-set", "sise=64", "--out", str(tmp_path / "p.mp4"), "--json"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 2
+    assert "sise" in json.loads(proc.stdout)["error"] and "size" in proc.stderr
+    assert not (tmp_path / "p.mp4").exists()

@@ -174,6 +174,10 @@ def simulate_cmd(
     registry, _ = registry_and_infos()
     pipeline = build_pipeline(registry, plugin, effects=effect, embedder=None)
     params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
+    # Check ζ before simulating: a typo should not cost a simulation.
+    zeta = pipeline.renderer.check_render_params(
+        {**pipeline.renderer.default_render_params, **parse_render_set(render_set)}
+    )
     t0 = time.perf_counter()
     trajectory = pipeline.simulator.simulate(params, seed=seed)
     sim_s = time.perf_counter() - t0
@@ -185,7 +189,6 @@ def simulate_cmd(
     if out is not None:
         from physinfer.video import write_video
 
-        zeta = {**pipeline.renderer.default_render_params, **parse_render_set(render_set)}
         t1 = time.perf_counter()
         clip = pipeline.renderer.render(trajectory, zeta)
         result["render_s"] = time.perf_counter() - t1

@@ -2,7 +2,8 @@
 
 The default target is simulated and rendered deterministically from a ground truth away
 from the centre of the space. Until the shipped SDN weights exist (``make pretrained``,
-issue 5), the flag refines with the parameter-free ``grid_spectrum`` embedder.
+issue 5), the flag refines with the parameter-free ``spectral`` embedder (the SDN front end
+and pooling).
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def make_phenomenon() -> Phenomenon:
         parameter_space=flag_parameter_space(),
         make_simulator=make_simulator,
         make_renderer=make_renderer,
-        default_embedder="grid_spectrum",
+        default_embedder="spectral",
         default_target=default_target,
         default_steps=40,
     )

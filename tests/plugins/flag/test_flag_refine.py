@@ -1,0 +1,58 @@
+"""``physinfer refine --plugin flag`` end to end through the CLI (short budgets)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from physinfer.rundir import RunDirectory
+from physinfer.types import Clip
+from physinfer.video import center_crop_resize, read_video, resample, write_video
+
+BIN = Path(sys.executable).parent / "physinfer"
+FAST = ["--optimizer", "random", "--noise-samples", "2", "--floor-samples", "2", "--json"]
+
+
+def cli(*args):
+    proc = subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout)
+
+
+def test_flag_refine_writes_outputs_and_resumes(tmp_path):
+    out = tmp_path / "run"
+    data = cli("refine", "--plugin", "flag", "--steps", "2", "--out", str(out), *FAST)
+    assert data["n_trials"] == 2 and len(data["best_params"]) == 17
+    assert {"wind_speed", "area_weight"} <= set(data["abs_errors"]), "the embedded target knows its truth"
+    floor = data["noise_floor"]
+    assert floor["n"] == 2 and floor["floor"] >= 0 and floor["gap"] > 0
+    for name in ("refinement.png", "side_by_side.mp4", "best_trajectory.npz", "target.mp4", "noise_prior.json"):
+        assert (out / name).stat().st_size > 0, name
+    trials = RunDirectory(out).read_trials()
+    assert trials[0].x == [0.0] * 17, "the first trial is the centre"
+
+    resumed = cli("refine", "--plugin", "flag", "--steps", "3", "--out", str(out), "--resume", *FAST)
+    assert resumed["n_trials"] == 3
+    assert [t.x for t in RunDirectory(out).read_trials()[:2]] == [t.x for t in trials]
+
+
+def test_colour_640x360_30fps_target_with_truth(tmp_path):
+    """A user's video: colour, 16:9, 30 fps; --truth gives abs_errors for those names only."""
+    from physinfer_flag.phenomenon import default_target
+
+    clip = resample(default_target().clip, 30.0)
+    square = center_crop_resize(clip.frames, 360)
+    if square.shape[-1] == 1:
+        square = np.repeat(square, 3, axis=-1)
+    square[..., 0] = np.clip(square[..., 0].astype(int) + 30, 0, 255)  # not gray
+    canvas = np.zeros((square.shape[0], 360, 640, 3), dtype=np.uint8)
+    canvas[:, :, 140:500] = square
+    video = write_video(tmp_path / "my_flag.mp4", Clip(frames=canvas, fps=30.0))
+    assert read_video(video).frames.shape[1:] == (360, 640, 3)
+
+    data = cli("refine", "--plugin", "flag", "--target", str(video), "--truth", "wind_speed=6.5",
+               "--steps", "2", "--out", str(tmp_path / "run"), *FAST)
+    assert set(data["abs_errors"]) == {"wind_speed"}
+    assert data["ground_truth"] == {"wind_speed": 6.5}
