@@ -32,3 +32,8 @@ def physinfer_register_commands(registry: Registry) -> None:
         "physinfer.cli.dataset_cmd:dataset_app",
         "Generate training datasets of simulated, rendered clips.",
     )
+    registry.add_command(
+        "diagnose",
+        "physinfer.cli.diagnose_cmd:diagnose_cmd",
+        "Find where a refined model disagrees with the video and name the missing effect.",
+    )

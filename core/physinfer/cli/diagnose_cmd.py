@@ -1,0 +1,108 @@
+"""``physinfer diagnose``: name the effect a refined model is missing, or say none is.
+
+Registered as a command by physinfer's built-in plugin; the work is done by
+:func:`physinfer.diagnose.workflow.run_diagnosis`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from physinfer.cli.app import (
+    JsonOpt,
+    PluginOpt,
+    SeedOpt,
+    emit_json,
+    err_console,
+    handle_errors,
+    parse_render_set,
+)
+
+
+@handle_errors()
+def diagnose_cmd(
+    plugin: PluginOpt,
+    target: Annotated[
+        Path | None, typer.Option("--target", help="Video to diagnose; default: the plugin's embedded target.")
+    ] = None,
+    fps: Annotated[float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")] = None,
+    truth: Annotated[
+        list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported only).")
+    ] = [],  # noqa: B006
+    steps: Annotated[int | None, typer.Option("--steps", help="Baseline trials (default: the plugin's).")] = None,
+    effect_steps: Annotated[
+        int | None, typer.Option("--effect-steps", help="Trials per augmented model and for the control (default: --steps).")
+    ] = None,
+    effect: Annotated[
+        list[str], typer.Option("--effect", help="Only try these effects (repeatable; default: all of the plugin's).")
+    ] = [],  # noqa: B006
+    optimizer: Annotated[str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")] = "ax",
+    embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
+    weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
+    device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
+    render_set: Annotated[
+        list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
+    ] = [],  # noqa: B006
+    floor_samples: Annotated[
+        int, typer.Option("--floor-samples", help="Re-simulations per gap measurement (>= 4).")
+    ] = 6,
+    calibrate: Annotated[
+        bool,
+        typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinement to calibrate the null scale."),
+    ] = True,
+    threshold: Annotated[
+        float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
+    ] = 2.0,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option("--out", help="Diagnosis directory (re-run to continue it).")] = None,
+    no_video: Annotated[bool, typer.Option("--no-video", help="Skip the side-by-side video.")] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Find where the refined model disagrees with the video and name the missing effect."""
+    import time
+
+    from physinfer.cli.app import registry_and_infos
+    from physinfer.diagnose.decide import DecisionRule
+    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+
+    if out is None:
+        out = Path("runs") / f"diagnose-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
+    registry, _ = registry_and_infos()
+    settings = DiagnoseSettings(
+        plugin=plugin,
+        out=out,
+        target_path=target,
+        fps=fps,
+        truth=tuple(truth),
+        render_set=parse_render_set(render_set),
+        steps=steps,
+        effect_steps=effect_steps,
+        optimizer=optimizer,
+        embedder=embedder,
+        weights=weights,
+        device=device,
+        seed=seed,
+        effects=tuple(effect),
+        floor_samples=floor_samples,
+        calibrate=calibrate,
+        rule=DecisionRule(misspecified_factor=threshold),
+        videos=not no_video,
+    )
+    report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))
+    if as_json:
+        emit_json(report)
+        return
+    err_console.print(
+        f"[bold]misspecified[/] {report['misspecified']}   gap {report['gap_before']:.4g} → {report['gap_after']:.4g}"
+        f"   (noise floor {report['noise_floor']:.4g}, null scale {report['null_scale']:.4g})",
+        highlight=False,
+    )
+    for c in report["candidates"]:
+        mark = "[green]significant[/]" if c["significant"] else "not significant"
+        err_console.print(
+            f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}", highlight=False
+        )
+    err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)

@@ -1,0 +1,32 @@
+"""The discrepancy workflow (``physinfer diagnose``): where a refined simulation and the
+measurement disagree, which registered effect the model is missing, and how much adding
+it shrinks the gap. See ``docs/discrepancy.md`` and :func:`run_diagnosis`.
+
+Heavy modules (figures, the refinement loop) are imported on use.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["DecisionRule", "DiagnoseSettings", "LocaliseConfig", "read_model", "run_diagnosis"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in ("DiagnoseSettings", "run_diagnosis"):
+        from physinfer.diagnose import workflow
+
+        return getattr(workflow, name)
+    if name == "DecisionRule":
+        from physinfer.diagnose.decide import DecisionRule
+
+        return DecisionRule
+    if name == "LocaliseConfig":
+        from physinfer.diagnose.localise import LocaliseConfig
+
+        return LocaliseConfig
+    if name == "read_model":
+        from physinfer.diagnose.model import read_model
+
+        return read_model
+    raise AttributeError(name)

@@ -1,0 +1,34 @@
+"""Augmented models: the baseline with one effect switched in, warm-started from its fit.
+
+An effect's parameters are *off* at their declared default, or — when a parameter
+declares none — at its low bound (the :class:`~physinfer.roles.Effect` convention). The
+warm start of an augmented model is therefore the baseline's best θ plus the effect's
+parameters off: its first trial reproduces the baseline fit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from physinfer.parameters import ParameterSpace
+from physinfer.refine import Pipeline
+from physinfer.roles import Effect
+
+
+def off_values(space: ParameterSpace) -> dict[str, float]:
+    """Each effect parameter at its "off" value: the declared default, else the low bound."""
+    return {s.name: float(s.default) if s.default is not None else float(s.bounds[0]) for s in space}
+
+
+def augmented_pipeline(base: Pipeline, effects: list[Effect]) -> Pipeline:
+    """The baseline's renderer and embedder with a simulator that has ``effects`` switched in."""
+    simulator = base.phenomenon.make_simulator(effects)
+    return Pipeline(base.phenomenon, simulator, base.renderer, base.embedder, list(effects))
+
+
+def warm_start(baseline_best: Mapping[str, float], effects: list[Effect]) -> dict[str, float]:
+    """The baseline's best θ with every effect parameter off."""
+    start = dict(baseline_best)
+    for effect in effects:
+        start.update(off_values(effect.parameter_space))
+    return start

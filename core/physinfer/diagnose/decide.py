@@ -1,0 +1,156 @@
+"""The two decisions of a diagnosis: is the model misspecified, and does an effect count.
+
+**Null scale.** A correctly specified model still leaves a gap: the chaos of the
+phenomenon (re-simulations of one θ differ — the noise floor) and the finite budget of the
+optimizer (θ̂ is not θ*). The null scale is the larger of the noise floor's 95th
+percentile and, when measured, the *self-consistency gap*: the gap the same optimizer and
+budget leave on a synthetic target made by the model itself at θ̂ (a parametric
+bootstrap — the posterior-predictive check of a model that is right by construction).
+
+**Misspecified** when the baseline's gap exceeds ``misspecified_factor`` × the null scale.
+
+**An effect counts** (is *significant*) when all three hold:
+
+1. its re-simulation distances to the target are smaller than those of the baseline
+   refined with the same extra budget from the same warm start (one-sided Mann–Whitney U
+   test on the ``K`` distances each, ``p < alpha``) — the improvement is not seed noise;
+2. the improvement exceeds the null scale — it is not what noise and the optimizer
+   leave anyway;
+3. it pays for its extra parameters: ``gap_effect ≤ per_parameter_factor^k · gap_before``
+   for ``k`` extra parameters (each must remove a fixed share of the gap, as a penalty
+   per parameter does in an information criterion).
+
+The named effect is the significant one with the smallest gap (fewer parameters first on
+ties), and only when the baseline is misspecified.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+
+
+@dataclass(frozen=True)
+class DecisionRule:
+    """Thresholds of :func:`misspecification` and :func:`effect_significance`.
+
+    Attributes:
+        misspecified_factor: The baseline is misspecified when its gap exceeds this many
+            null scales.
+        alpha: Level of the one-sided rank test of an effect's improvement.
+        per_parameter_factor: Each extra parameter must shrink the gap by this factor.
+    """
+
+    misspecified_factor: float = 2.0
+    alpha: float = 0.05
+    per_parameter_factor: float = 0.8
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` on thresholds outside their ranges."""
+        if not self.misspecified_factor >= 1.0:
+            raise UserInputError(f"the misspecification factor must be >= 1, got {self.misspecified_factor}")
+        if not 0.0 < self.alpha < 0.5:
+            raise UserInputError(f"alpha must be in (0, 0.5), got {self.alpha}")
+        if not 0.0 < self.per_parameter_factor <= 1.0:
+            raise UserInputError(f"the per-parameter factor must be in (0, 1], got {self.per_parameter_factor}")
+
+
+def null_scale(floor_q95: float, self_gap: float | None) -> float:
+    """The gap a correctly specified model leaves: max of noise (q95) and self-consistency gap."""
+    values = [v for v in (floor_q95, self_gap) if v is not None and math.isfinite(v)]
+    return max(values) if values else 0.0
+
+
+def misspecification(gap: float, scale: float, rule: DecisionRule) -> dict[str, Any]:
+    """Decide whether a baseline gap is beyond what a correct model leaves.
+
+    Args:
+        gap: The baseline's gap (median re-simulation distance to the target).
+        scale: The null scale (see :func:`null_scale`).
+        rule: Thresholds.
+
+    Returns:
+        ``misspecified``, ``threshold`` and ``gap_over_null`` (``None`` for a zero scale).
+    """
+    threshold = rule.misspecified_factor * scale
+    return {
+        "misspecified": bool(gap > threshold),
+        "threshold": threshold,
+        "gap_over_null": (gap / scale) if scale > 0 else None,
+    }
+
+
+def rank_test_less(a: Sequence[float], b: Sequence[float]) -> float:
+    """One-sided Mann–Whitney U p-value that ``a`` tends to be smaller than ``b``.
+
+    Exact (no ties) or asymptotic with tie correction, as :func:`scipy.stats.mannwhitneyu`
+    chooses; 1.0 when either sample is empty or both are identical constants.
+    """
+    from scipy.stats import mannwhitneyu
+
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size == 0 or b.size == 0:
+        return 1.0
+    if np.ptp(np.concatenate([a, b])) == 0.0:
+        return 1.0
+    return float(mannwhitneyu(a, b, alternative="less").pvalue)
+
+
+def effect_significance(
+    *,
+    distances: Sequence[float],
+    baseline_distances: Sequence[float],
+    gap: float,
+    gap_before: float,
+    n_params: int,
+    scale: float,
+    rule: DecisionRule,
+) -> dict[str, Any]:
+    """Whether one effect's improvement counts.
+
+    Args:
+        distances: ``K`` re-simulation distances to the target of the augmented model.
+        baseline_distances: The same for the equal-budget baseline.
+        gap: The augmented model's gap.
+        gap_before: The equal-budget baseline's gap.
+        n_params: The effect's extra parameters ``k``.
+        scale: The null scale.
+        rule: Thresholds.
+
+    Returns:
+        ``improvement`` (gap_before − gap), ``ratio`` (gap / gap_before), ``p_value``,
+        ``required_ratio``, the three checks and ``significant``.
+    """
+    improvement = gap_before - gap
+    ratio = gap / gap_before if gap_before > 0 else float("inf")
+    p_value = rank_test_less(distances, baseline_distances)
+    required = rule.per_parameter_factor**n_params
+    checks = {
+        "beats_seed_noise": p_value < rule.alpha,
+        "beats_null_scale": improvement > scale,
+        "pays_for_parameters": ratio <= required,
+    }
+    return {
+        "improvement": improvement,
+        "ratio": ratio,
+        "p_value": p_value,
+        "required_ratio": required,
+        "checks": checks,
+        "significant": all(checks.values()),
+    }
+
+
+def name_effect(candidates: Sequence[dict[str, Any]], misspecified: bool) -> str | None:
+    """The significant candidate with the smallest gap (fewer parameters on ties), if misspecified."""
+    if not misspecified:
+        return None
+    winners = [c for c in candidates if c["significant"]]
+    if not winners:
+        return None
+    return min(winners, key=lambda c: (c["gap"], c["n_params"]))["effect"]

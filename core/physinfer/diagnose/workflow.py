@@ -1,0 +1,434 @@
+"""The discrepancy workflow: refine, measure the gap, localise, try every effect, name one.
+
+Stages, each a resumable refinement in its own run directory under ``--out``::
+
+    baseline/            the baseline model refined from the centre (``steps`` trials)
+    calibration/         the baseline refined against a synthetic target made at its own
+                         best θ (self-consistency; skipped with ``calibrate=False``)
+    control/             the baseline refined ``effect_steps`` more trials from its best θ
+    effect-<name>/       the baseline with <name> switched in, the same budget and warm start
+    diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
+
+Step 2's gap is each model's best θ re-simulated under the same ``K`` fresh seeds (see
+:mod:`physinfer.diagnose.gap`); the decisions are in :mod:`physinfer.diagnose.decide`.
+Re-running with the same ``--out`` continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.diagnose.candidates import augmented_pipeline, warm_start
+from physinfer.diagnose.decide import (
+    DecisionRule,
+    effect_significance,
+    misspecification,
+    name_effect,
+    null_scale,
+)
+from physinfer.diagnose.gap import gap_numbers, measure_gap
+from physinfer.diagnose.localise import LocaliseConfig, localise
+from physinfer.diagnose.warmstart import warm_start_factory
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_write_json
+from physinfer.noise import NoiseFloor, noise_seeds
+from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
+from physinfer.registry import Registry
+from physinfer.roles import Target
+from physinfer.rundir import RunDirectory
+
+Log = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class DiagnoseSettings:
+    """Everything a diagnosis needs besides the registry.
+
+    Attributes:
+        plugin: Phenomenon name.
+        out: Directory of the diagnosis (created; stages are sub-directories).
+        target_path: Video to diagnose; ``None``: the phenomenon's embedded target.
+        fps: Frame rate of ``target_path`` when the file does not say.
+        truth: ``NAME=VALUE`` known values (reported, never used by the decisions).
+        render_set: ζ overrides for the simulations.
+        steps: Baseline budget (``None``: the phenomenon's default).
+        effect_steps: Budget of the control and of each augmented model (``None``: ``steps``).
+        optimizer: Registered optimizer name.
+        embedder: Embedder name (``None``: the phenomenon's default).
+        weights: Embedder weights.
+        device: torch device of the embedder.
+        seed: Seed of optimizers and simulations.
+        effects: Effects to try (empty: every effect registered for the phenomenon).
+        floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
+        calibrate: Run the self-consistency refinement (the null scale's optimizer part).
+        rule: Decision thresholds.
+        localise: Localisation settings.
+        videos: Write the side-by-side video.
+    """
+
+    plugin: str
+    out: Path
+    target_path: Path | None = None
+    fps: float | None = None
+    truth: tuple[str, ...] = ()
+    render_set: Mapping[str, Any] = field(default_factory=dict)
+    steps: int | None = None
+    effect_steps: int | None = None
+    optimizer: str = "ax"
+    embedder: str | None = None
+    weights: Path | None = None
+    device: str | None = None
+    seed: int = 0
+    effects: tuple[str, ...] = ()
+    floor_samples: int = 6
+    calibrate: bool = True
+    rule: DecisionRule = field(default_factory=DecisionRule)
+    localise: LocaliseConfig = field(default_factory=LocaliseConfig)
+    videos: bool = True
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` naming the first bad setting."""
+        for name, value in (("--steps", self.steps), ("--effect-steps", self.effect_steps)):
+            if value is not None and value < 1:
+                raise UserInputError(f"{name} must be at least 1, got {value}")
+        if self.floor_samples < 4:
+            raise UserInputError(
+                f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
+            )
+        self.rule.validate()
+        try:
+            self.localise.validate()
+        except ValueError as exc:
+            raise UserInputError(f"localisation settings: {exc}") from None
+
+
+@dataclass
+class Stage:
+    """One refined model of the diagnosis and its gap."""
+
+    label: str
+    pipeline: Pipeline
+    result: RefineResult
+    gap: NoiseFloor
+    n_params: int = 0
+
+
+def run_stage(
+    name: str,
+    pipeline: Pipeline,
+    target: Target,
+    *,
+    registry: Registry,
+    settings: DiagnoseSettings,
+    steps: int,
+    start: Mapping[str, float] | None,
+    target_label: str,
+) -> RefineResult:
+    """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
+
+    Args:
+        name: Sub-directory of the stage.
+        pipeline: The model.
+        target: What to match.
+        registry: For the optimizer.
+        settings: The diagnosis settings (optimizer, seed, embedder).
+        steps: Trials in all.
+        start: Physical warm-start values (``None``: the centre).
+        target_label: Stored in ``run.json``.
+    """
+    space = pipeline.simulator.parameter_space
+    factory = registry.get("optimizers", settings.optimizer).load()
+    if start is not None:
+        factory = warm_start_factory(factory, space.to_unit(space.complete(start)))
+    run_dir = RunDirectory(settings.out / name)
+    run_info = {
+        "plugin": settings.plugin,
+        "optimizer": settings.optimizer,
+        "seed": settings.seed,
+        "steps": steps,
+        "effects": [e.name for e in pipeline.effects],
+        "embedder": settings.embedder or pipeline.phenomenon.default_embedder,
+        "parameters": space.to_dict(),
+        "target": target_label,
+        "render_params": dict(target.render_params),
+        "truth": target.truth,
+        "start": None if start is None else {k: float(v) for k, v in start.items()},
+        "stage": name,
+    }
+    config = RefineConfig(steps=steps, optimizer=settings.optimizer, seed=settings.seed)
+    resume = run_dir.run_file.is_file()
+    return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
+
+
+def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
+    from physinfer.session import build_pipeline, load_target
+
+    pipeline = build_pipeline(
+        registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device
+    )
+    target = load_target(
+        pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set
+    )
+    return pipeline, target
+
+
+def _clip(pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int) -> Any:
+    return pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), target.render_params)
+
+
+def _calibration_target(
+    pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int, encode_dir: Path | None
+) -> Target:
+    """A synthetic target made by the baseline model itself at its best θ (another seed).
+
+    With ``encode_dir`` the clip makes a round trip through the video encoder, as a target
+    read from a file did: compression changes the pixels, and a self-consistency target
+    without it would be easier to match than the real one.
+    """
+    clip = _clip(pipeline, params, target, seed)
+    if encode_dir is not None:
+        from physinfer.video import read_video, write_video
+
+        encode_dir.mkdir(parents=True, exist_ok=True)
+        path = write_video(encode_dir / "self_target.mp4", clip)
+        clip = read_video(path, fps=clip.fps)
+    return Target(clip, dict(params), dict(target.render_params), "self-consistency target at the baseline fit")
+
+
+def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | None = None) -> dict[str, Any]:
+    """Run (or continue) a diagnosis end to end; write its outputs; return the JSON report.
+
+    Args:
+        registry: Loaded plugin registry.
+        settings: What to diagnose and how.
+        log: Progress lines (stderr in the CLI); ``None``: silent.
+
+    Returns:
+        The report, also written to ``out/diagnosis.json`` (keys described in
+        ``docs/discrepancy.md``).
+    """
+    settings.validate()
+    say = log or (lambda _msg: None)
+    registry.get("optimizers", settings.optimizer)  # fail early, listing the installed ones
+    start_time = time.perf_counter()
+    base, target = _load(registry, settings)
+    phenomenon = base.phenomenon
+    effect_names = list(settings.effects) or registry.effects_of(phenomenon.name)
+    if not effect_names:
+        raise UserInputError(f"no effects are registered for {phenomenon.name!r}: nothing to try")
+    effect_objs = {name: registry.effect(name, phenomenon=phenomenon.name) for name in effect_names}
+    steps = settings.steps or phenomenon.default_steps
+    effect_steps = settings.effect_steps or steps
+    target_label = str(settings.target_path) if settings.target_path else "default"
+    settings.out.mkdir(parents=True, exist_ok=True)
+    target_embedding = base.embedder.embed(target.clip)
+    seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
+    common = {"registry": registry, "settings": settings}
+
+    def gap_of(pipeline: Pipeline, params: Mapping[str, float], stage: str) -> NoiseFloor:
+        return measure_gap(
+            pipeline, params, target.render_params, target_embedding, seeds=seeds, cache_dir=settings.out / stage
+        )
+
+    # 1. The baseline.
+    say(f"[1/5] refining the baseline ({steps} trials)")
+    baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
+    gap0 = gap_of(base, baseline.best_params, "baseline")
+
+    # 2. The gap against the noise floor and the self-consistency gap.
+    self_gap = None
+    if settings.calibrate:
+        say(f"[2/5] self-consistency: refining the baseline against its own fit ({steps} trials)")
+        cal_seed = noise_seeds(settings.seed + 7, 1)[0]
+        encode_dir = settings.out / "calibration" if settings.target_path is not None else None
+        cal_target = _calibration_target(base, baseline.best_params, target, cal_seed, encode_dir)
+        cal = run_stage(
+            "calibration", base, cal_target, steps=steps, start=None, target_label="self-consistency", **common
+        )
+        cal_gap = measure_gap(
+            base,
+            cal.best_params,
+            target.render_params,
+            base.embedder.embed(cal_target.clip),
+            seeds=seeds,
+            cache_dir=settings.out / "calibration",
+        )
+        self_gap = cal_gap.gap
+    scale = null_scale(gap0.floor_q95, self_gap)
+    verdict = misspecification(float(gap0.gap), scale, settings.rule)
+    say(
+        f"      gap {gap0.gap:.4g}, noise floor {gap0.floor:.4g}, null scale {scale:.4g} → "
+        + ("misspecified" if verdict["misspecified"] else "within what a correct model leaves")
+    )
+
+    # 4. Equal-budget control and one augmented model per effect, all warm-started.
+    say(f"[3/5] control: the baseline refined {effect_steps} more trials from its fit")
+    control = run_stage(
+        "control", base, target, steps=effect_steps, start=baseline.best_params, target_label=target_label, **common
+    )
+    stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
+    for name, effect in effect_objs.items():
+        say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
+        pipeline = augmented_pipeline(base, [effect])
+        result = run_stage(
+            f"effect-{name}",
+            pipeline,
+            target,
+            steps=effect_steps,
+            start=warm_start(baseline.best_params, [effect]),
+            target_label=target_label,
+            **common,
+        )
+        stages.append(
+            Stage(name, pipeline, result, gap_of(pipeline, result.best_params, f"effect-{name}"),
+                  n_params=len(effect.parameter_space))
+        )
+
+    before = stages[0]
+    gap_before = float(before.gap.gap)
+    candidates = []
+    for stage in stages[1:]:
+        decision = effect_significance(
+            distances=stage.gap.to_target or [],
+            baseline_distances=before.gap.to_target or [],
+            gap=float(stage.gap.gap),
+            gap_before=gap_before,
+            n_params=stage.n_params,
+            scale=scale,
+            rule=settings.rule,
+        )
+        candidates.append(
+            {
+                "effect": stage.label,
+                "description": effect_objs[stage.label].description,
+                "gap": float(stage.gap.gap),
+                "n_params": stage.n_params,
+                **decision,
+                "best_params": stage.result.best_params,
+                "effect_params": {k: stage.result.best_params[k] for k in effect_objs[stage.label].parameter_space.names},
+                "distances": list(stage.gap.to_target or []),
+                "floor": stage.gap.floor,
+                "run_dir": stage.result.run_dir,
+            }
+        )
+    named = name_effect(candidates, verdict["misspecified"])
+    after = next((s for s in stages if s.label == named), before)
+    say("[5/5] " + (f"named: {named}" if named else "no effect explains the gap") + "; localising and writing outputs")
+
+    report = _outputs(
+        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, baseline,
+    )
+    report["wall_time_s"] = time.perf_counter() - start_time
+    atomic_write_json(settings.out / "diagnosis.json", report)
+    base.renderer.close()
+    return report
+
+
+def _outputs(
+    settings: DiagnoseSettings,
+    target: Target,
+    stages: Sequence[Stage],
+    before: Stage,
+    after: Stage,
+    named: str | None,
+    candidates: list[dict[str, Any]],
+    verdict: dict[str, Any],
+    scale: float,
+    gap0: NoiseFloor,
+    self_gap: float | None,
+    baseline: RefineResult,
+) -> dict[str, Any]:
+    """Localise, draw, write the model file and videos; assemble the report."""
+    from physinfer.diagnose.figures import plot_gaps, plot_maps
+    from physinfer.diagnose.model import write_model
+
+    out = settings.out
+    fit_before = _clip(before.pipeline, before.result.best_params, target, settings.seed)
+    numbers, t_maps, b_maps = localise(target.clip, fit_before, settings.localise)
+    rows = [("target", t_maps), ("baseline fit", b_maps)]
+    clips = [target.clip, fit_before]
+    after_numbers = None
+    if named:
+        fit_after = _clip(after.pipeline, after.result.best_params, target, settings.seed)
+        after_numbers, _, a_maps = localise(target.clip, fit_after, settings.localise)
+        rows.append((f"+ {named}", a_maps))
+        clips.append(fit_after)
+    figures = {
+        "maps": str(plot_maps(rows, out / "maps.png")),
+        "gaps": str(
+            plot_gaps(
+                [{"label": s.label, "gap": float(s.gap.gap), "distances": list(s.gap.to_target or [])} for s in stages],
+                floor=before.gap.floor,
+                scale=scale,
+                threshold=verdict["threshold"],
+                named=named,
+                path=out / "gaps.png",
+            )
+        ),
+    }
+    videos = {}
+    if settings.videos:
+        from physinfer.video import side_by_side, write_video
+
+        videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
+    space = after.pipeline.simulator.parameter_space
+    model = write_model(
+        out / "model.json",
+        plugin=settings.plugin,
+        effects=[e.name for e in after.pipeline.effects],
+        space=space,
+        values=after.result.best_params,
+        gap=float(after.gap.gap),
+        source=after.result.run_dir,
+    )
+    gap_after = float(after.gap.gap)
+    gap_before = float(before.gap.gap)
+    return {
+        "plugin": settings.plugin,
+        "target": str(settings.target_path) if settings.target_path else "default",
+        "truth": target.truth,
+        "misspecified": verdict["misspecified"],
+        "named_effect": named,
+        "gap_before": gap_before,
+        "gap_after": gap_after,
+        "gap_ratio": gap_after / gap_before if gap_before > 0 else None,
+        "noise_floor": before.gap.floor,
+        "null_scale": scale,
+        "threshold": verdict["threshold"],
+        "self_consistency_gap": self_gap,
+        "baseline": {
+            "best_params": baseline.best_params,
+            "best_distance": baseline.best_distance,
+            **gap_numbers(gap0),
+            "run_dir": baseline.run_dir,
+        },
+        "control": {"best_params": before.result.best_params, **gap_numbers(before.gap), "run_dir": before.result.run_dir},
+        "candidates": candidates,
+        "regions": numbers["regions"],
+        "localisation": numbers["global"],
+        "regions_after": None if after_numbers is None else after_numbers["regions"],
+        "model_file": str(out / "model.json"),
+        "model": {"effects": list(model.effects), "values": model.values},
+        "figures": figures,
+        "videos": videos,
+        "settings": {
+            "steps": baseline.n_trials,
+            "effect_steps": before.result.n_trials,
+            "optimizer": settings.optimizer,
+            "seed": settings.seed,
+            "floor_samples": settings.floor_samples,
+            "calibrate": settings.calibrate,
+            "rule": {
+                "misspecified_factor": settings.rule.misspecified_factor,
+                "alpha": settings.rule.alpha,
+                "per_parameter_factor": settings.rule.per_parameter_factor,
+            },
+        },
+        "seeds_checked": [int(s) for s in np.asarray(before.gap.seeds)],
+    }
