@@ -339,6 +339,27 @@ def _rod_mesh(rod: np.ndarray) -> Any:
     return pyrender.Mesh.from_trimesh(shaft, material=material)
 
 
+def hanging_length(trajectory: Trajectory) -> float:
+    """The fabric's rest length from rod to hem, in metres, whatever its pose.
+
+    With ``extras["uv"]``: the median over mesh edges running along v (the hanging
+    direction) of ``|p_i - p_j| / |Δv|`` in the first frame — a nearly inextensible sheet
+    keeps it in any pose, so the camera, framed from it, does not move with the motion.
+    Without uv: the first frame's vertical extent.
+    """
+    first = trajectory.vertices[0].astype(np.float64)
+    if "uv" in trajectory.extras:
+        uv = _texture_coordinates(trajectory).astype(np.float64)
+        faces = trajectory.faces
+        edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        du, dv = np.abs(uv[edges[:, 0]] - uv[edges[:, 1]]).T
+        along_v = dv > 4.0 * du
+        if along_v.any():
+            span = np.linalg.norm(first[edges[along_v, 0]] - first[edges[along_v, 1]], axis=1)
+            return float(np.median(span / dv[along_v]))
+    return max(float(np.ptp(first[:, 2])), 1e-3)
+
+
 def _camera(trajectory: Trajectory, rod: np.ndarray, params: HangingRenderParams) -> tuple[Any, np.ndarray]:
     """Perspective camera and its pose ``(4, 4)``: frames the fabric's reach at any fan speed.
 
@@ -348,8 +369,7 @@ def _camera(trajectory: Trajectory, rod: np.ndarray, params: HangingRenderParams
     """
     import pyrender
 
-    first = trajectory.vertices[0].astype(np.float64)
-    length = max(float(rod[0, 2] - first[:, 2].min()), float(np.ptp(first[:, 0])), 1e-3)
+    length = hanging_length(trajectory)
     target = rod.mean(axis=0) + np.array([0.0, 0.25 * length, -0.5 * length])
     height, width = params.size
     yfov = math.radians(params.fov_deg)

@@ -79,7 +79,7 @@ class HangingClothConfig:
             sheet in a uniform wind bending barely shows at this grid spacing (docs).
         fan_level: Fan setting of the video, ``"W1"``, ``"W2"`` or ``"W3"``.
         fan: How the fan blows (speeds of the levels, gusts).
-        n_frames: Recorded frames.
+        n_frames: Recorded frames (32 at 25 fps: the 30 the SDN front end reads, and a margin).
         fps: Output frame rate in Hz.
         warmup_s: Seconds simulated from rest, fan on, before recording.
         substeps: Integration steps per frame; ``None`` chooses them from the grid spacing
@@ -101,7 +101,7 @@ class HangingClothConfig:
     gather: float = 0.8
     fan_level: str = "W2"
     fan: FanSettings = field(default_factory=FanSettings)
-    n_frames: int = 40
+    n_frames: int = 32
     fps: float = 25.0
     warmup_s: float = 1.0
     substeps: int | None = None
@@ -138,6 +138,8 @@ class HangingClothConfig:
                 raise UserInputError(message)
         fan_level_index(self.fan_level)
         self.fan.validate()
+        if self.dt > 0.01:
+            raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
 
     @property
     def grid(self) -> tuple[int, int]:
