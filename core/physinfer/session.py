@@ -86,6 +86,7 @@ def refine(
     weights: Path | None = None,
     device: str | None = None,
     effects: Sequence[str] = (),
+    model: Path | None = None,
     render_set: Mapping[str, Any] | None = None,
     seed: int = 0,
     out: Path,
@@ -96,8 +97,18 @@ def refine(
     seeds_per_trial: int = 1,
     floor_samples: int = 4,
 ) -> RefineResult:
-    """Run or continue a refinement end to end and write every output into ``out``."""
+    """Run or continue a refinement end to end and write every output into ``out``.
+
+    ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
+    in and the refinement is warm-started from its values.
+    """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
+    model_file = None
+    if model is not None:
+        from physinfer.diagnose.model import model_for_refine
+
+        model_file = model_for_refine(model, plugin, effects)
+        effects = model_file.effects
     pipeline = build_pipeline(registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device)
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
@@ -130,6 +141,11 @@ def refine(
         "seeds_per_trial": seeds_per_trial,
     }
     factory = registry.get("optimizers", optimizer).load()
+    if model_file is not None:
+        from physinfer.diagnose.warmstart import warm_start_factory
+
+        space = pipeline.simulator.parameter_space
+        factory = warm_start_factory(factory, space.to_unit(model_file.start_for(space)))
     with _progress(budget, enabled=progress) as on_trial:
         result = run_refinement(
             pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial

@@ -220,6 +220,10 @@ def refine_cmd(
     weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
     device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
     effect: Annotated[list[str], typer.Option("--effect", help="Switch an effect in (repeatable).")] = [],  # noqa: B006
+    model: Annotated[
+        Path | None,
+        typer.Option("--model", help="Model file from `physinfer diagnose`: its effects, warm-started from its fit."),
+    ] = None,
     render_set: Annotated[
         list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
     ] = [],  # noqa: B006
@@ -266,6 +270,7 @@ def refine_cmd(
         weights=weights,
         device=device,
         effects=effect,
+        model=model,
         render_set=parse_render_set(render_set),
         seed=seed,
         out=out,

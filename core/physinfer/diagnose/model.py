@@ -101,3 +101,20 @@ def read_model(path: Path) -> ModelFile:
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise UserInputError(f"--model {path} is incomplete or malformed ({exc})") from None
+
+
+def model_for_refine(path: Path, plugin: str, effects: Sequence[str]) -> ModelFile:
+    """Read a model file for ``physinfer refine --model`` and check it fits the request.
+
+    Raises:
+        UserInputError: when the file is for another plugin, or ``--effect`` names
+            effects other than the file's.
+    """
+    model = read_model(path)
+    if model.plugin != plugin:
+        raise UserInputError(f"--model {path} is a model of {model.plugin!r}, not of --plugin {plugin!r}")
+    if effects and sorted(effects) != sorted(model.effects):
+        raise UserInputError(
+            f"--effect {list(effects)} contradicts --model {path} (effects {list(model.effects)}); drop --effect"
+        )
+    return model
