@@ -1,0 +1,198 @@
+"""Tests of physinfer.diagnose: localisation, decisions, warm starts, model files, and the
+workflow end to end on the pendulum example (hidden drag; no effect)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.diagnose.candidates import off_values, warm_start
+from physinfer.diagnose.decide import (
+    DecisionRule,
+    effect_significance,
+    misspecification,
+    name_effect,
+    null_scale,
+    rank_test_less,
+)
+from physinfer.diagnose.localise import LocaliseConfig, localise
+from physinfer.diagnose.model import model_for_refine, read_model, write_model
+from physinfer.diagnose.warmstart import WarmStartOptimizer, warm_start_factory
+from physinfer.errors import UserInputError
+from physinfer.optimizers.cma import CMAOptimizer
+from physinfer.optimizers.random import RandomOptimizer
+from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.types import Clip
+
+
+def _grating(freq_map: np.ndarray, fps: float = 25.0, n: int = 64, size: int = 64, amp=None) -> Clip:
+    """Pixels flickering at a per-region frequency: ``freq_map`` ``(G, G)`` Hz."""
+    g = freq_map.shape[0]
+    cell = size // g
+    f = np.kron(freq_map, np.ones((cell, cell)))
+    a = np.ones_like(f) if amp is None else np.kron(amp, np.ones((cell, cell)))
+    t = np.arange(n)[:, None, None] / fps
+    gray = 0.5 + 0.4 * a * np.sin(2 * np.pi * f * t)
+    frames = np.repeat((gray * 255).astype(np.uint8)[..., None], 3, axis=-1)
+    return Clip(frames, fps)
+
+
+# ------------------------------------------------------------------------ localisation
+
+
+def test_localise_ranks_the_region_that_moves_differently_first():
+    base = np.full((4, 4), 2.0)
+    other = base.copy()
+    other[1, 2] = 5.0
+    numbers, t_maps, f_maps = localise(_grating(other), _grating(base), LocaliseConfig(size=64, grid=4))
+    top = numbers["regions"][0]
+    assert (top["row"], top["col"]) == (1, 2)
+    assert top["freq_target_hz"] == pytest.approx(5.0, abs=0.5)
+    assert top["freq_fit_hz"] == pytest.approx(2.0, abs=0.5)
+    assert numbers["regions"][1]["score"] < 0.1 * top["score"]
+    assert t_maps.dominant.shape == (64, 64)
+
+
+def test_localise_finds_amplitude_and_nonstationarity_differences():
+    amp = np.ones((2, 2))
+    amp_t = amp.copy()
+    amp_t[0, 0] = 0.2
+    numbers, _, _ = localise(_grating(np.full((2, 2), 3.0), amp=amp_t), _grating(np.full((2, 2), 3.0), amp=amp),
+                             LocaliseConfig(size=32, grid=2))
+    top = numbers["regions"][0]
+    assert (top["row"], top["col"]) == (0, 0) and top["log10_power_ratio"] < -1.0
+    # A clip whose motion dies half-way is non-stationary; a steady one is not.
+    steady = _grating(np.full((2, 2), 3.0))
+    frames = steady.frames.copy()
+    frames[32:] = frames[32:].mean(axis=0, keepdims=True).astype(np.uint8)
+    numbers, _, _ = localise(Clip(frames, 25.0), steady, LocaliseConfig(size=32, grid=2))
+    g = numbers["global"]
+    assert g["nonstationarity_target"] > 0.5 > g["nonstationarity_fit"]
+
+
+def test_identical_clips_have_no_discrepancy():
+    clip = _grating(np.array([[1.0, 2.0], [3.0, 4.0]]))
+    numbers, _, _ = localise(clip, clip, LocaliseConfig(size=32, grid=2))
+    assert max(r["score"] for r in numbers["regions"]) == pytest.approx(0.0, abs=1e-9)
+
+
+# --------------------------------------------------------------------------- decisions
+
+
+def test_null_scale_and_misspecification():
+    assert null_scale(1.0, None) == 1.0
+    assert null_scale(1.0, 3.0) == 3.0
+    rule = DecisionRule(misspecified_factor=2.0)
+    assert misspecification(7.0, 3.0, rule)["misspecified"]
+    assert not misspecification(5.0, 3.0, rule)["misspecified"]
+
+
+def test_rank_test_is_one_sided_and_handles_deterministic_samples():
+    assert rank_test_less([1.0] * 4, [2.0] * 4) < 0.05  # deterministic, separated
+    assert rank_test_less([2.0] * 4, [1.0] * 4) > 0.5
+    assert rank_test_less([1.0] * 4, [1.0] * 4) == 1.0
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(1.0, 0.1, 6), rng.normal(1.0, 0.1, 6)
+    assert rank_test_less(a, b) > 0.01
+
+
+def test_effect_significance_needs_all_three_checks():
+    rule = DecisionRule(alpha=0.05, per_parameter_factor=0.8)
+    good = effect_significance(distances=[1.0] * 6, baseline_distances=[10.0] * 6, gap=1.0, gap_before=10.0,
+                               n_params=2, scale=2.0, rule=rule)
+    assert good["significant"] and good["improvement"] == 9.0 and good["ratio"] == 0.1
+    small = effect_significance(distances=[9.0] * 6, baseline_distances=[10.0] * 6, gap=9.0, gap_before=10.0,
+                                n_params=1, scale=0.5, rule=rule)
+    assert small["checks"]["beats_seed_noise"] and small["checks"]["beats_null_scale"]
+    assert not small["checks"]["pays_for_parameters"] and not small["significant"]
+    noisy = effect_significance(distances=[5.0, 12.0, 4.0, 11.0], baseline_distances=[10.0, 6.0, 9.0, 7.0],
+                                gap=8.0, gap_before=8.5, n_params=1, scale=0.1, rule=rule)
+    assert not noisy["checks"]["beats_seed_noise"]
+
+
+def test_name_effect_only_when_misspecified():
+    cands = [
+        {"effect": "a", "gap": 2.0, "n_params": 1, "significant": True},
+        {"effect": "b", "gap": 1.0, "n_params": 2, "significant": True},
+        {"effect": "c", "gap": 0.5, "n_params": 1, "significant": False},
+    ]
+    assert name_effect(cands, misspecified=True) == "b"
+    assert name_effect(cands, misspecified=False) is None
+    assert name_effect(cands[2:], misspecified=True) is None
+
+
+def test_decision_rule_validates():
+    with pytest.raises(UserInputError):
+        DecisionRule(misspecified_factor=0.5).validate()
+    with pytest.raises(UserInputError):
+        DecisionRule(alpha=0.7).validate()
+
+
+# ------------------------------------------------------------------------- warm starts
+
+
+def test_warm_start_first_trial_and_coordinate_map():
+    start = np.array([0.5, -1.0, 0.2])
+    opt = warm_start_factory(RandomOptimizer, start)(dim=3, seed=0, names=["a", "b", "c"])
+    first = opt.attach(np.zeros(3))
+    np.testing.assert_allclose(first.x, start)
+    for trial in opt.ask(20):
+        assert np.all(np.abs(trial.x) <= 1.0)
+    z = np.array([0.3, 0.4, -0.9])
+    np.testing.assert_allclose(opt.to_z(opt.to_x(z)), z)
+    np.testing.assert_allclose(opt.to_x(np.ones(3)), np.ones(3))
+    np.testing.assert_allclose(opt.to_x(-np.ones(3)), -np.ones(3))
+
+
+def test_warm_started_cma_searches_around_the_start():
+    start = np.array([0.8, -0.6])
+    opt = WarmStartOptimizer(CMAOptimizer(dim=2, seed=0), start)
+    opt.attach(np.zeros(2))
+    xs = np.array([t.x for t in opt.ask(6)])
+    plain = np.array([t.x for t in CMAOptimizer(dim=2, seed=0).ask(6)])
+    assert np.linalg.norm(xs.mean(axis=0) - start) < np.linalg.norm(plain.mean(axis=0) - start)
+
+
+def test_resume_replays_the_warm_start_exactly():
+    start = np.array([0.3, -0.2])
+    first = WarmStartOptimizer(RandomOptimizer(dim=2, seed=1), start)
+    x0 = first.attach(np.zeros(2)).x
+    replay = WarmStartOptimizer(RandomOptimizer(dim=2, seed=1), start)
+    np.testing.assert_allclose(replay.attach(x0).x, x0)
+
+
+def test_effect_parameters_start_off():
+    space = ParameterSpace([ParameterSpec("c", (0.0, 2.0)), ParameterSpec("yaw", (-60.0, 60.0), default=0.0)])
+    assert off_values(space) == {"c": 0.0, "yaw": 0.0}
+
+    class FakeEffect:
+        parameter_space = space
+
+    assert warm_start({"length": 1.0}, [FakeEffect()]) == {"length": 1.0, "c": 0.0, "yaw": 0.0}
+
+
+# -------------------------------------------------------------------------- model file
+
+
+def test_model_file_round_trip_and_checks(tmp_path: Path):
+    space = ParameterSpace([ParameterSpec("length", (0.4, 1.6)), ParameterSpec("drag_quadratic", (0.0, 2.0))])
+    write_model(tmp_path / "model.json", plugin="pendulum", effects=["quadratic_drag"], space=space,
+                values={"length": 1.1, "drag_quadratic": 0.9}, gap=0.5)
+    model = read_model(tmp_path / "model.json")
+    assert model.effects == ("quadratic_drag",) and model.extra["gap"] == 0.5
+    assert model.start_for(space) == {"length": 1.1, "drag_quadratic": 0.9}
+    assert model_for_refine(tmp_path / "model.json", "pendulum", []).plugin == "pendulum"
+    with pytest.raises(UserInputError, match="not of --plugin"):
+        model_for_refine(tmp_path / "model.json", "flag", [])
+    with pytest.raises(UserInputError, match="contradicts"):
+        model_for_refine(tmp_path / "model.json", "pendulum", ["other"])
+    with pytest.raises(UserInputError, match="do not match"):
+        model.start_for(ParameterSpace([ParameterSpec("length", (0.4, 1.6))]))
+    (tmp_path / "bad.json").write_text(json.dumps({"plugin": "pendulum"}))
+    with pytest.raises(UserInputError, match="not a physinfer model file"):
+        read_model(tmp_path / "bad.json")
+    with pytest.raises(UserInputError, match="no such file"):
+        read_model(tmp_path / "missing.json")
