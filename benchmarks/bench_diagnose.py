@@ -1,0 +1,188 @@
+"""Benchmark of ``physinfer diagnose``: does it name a hidden effect, and only then?
+
+For each hidden effect of a phenomenon (and for "none"), and each seed, a target video is
+simulated with that effect switched on at a realistic strength (random base θ and effect
+strength, seeded), written to MP4, and diagnosed with every registered effect as a
+candidate. Prints one JSON object: ``cases`` (one per diagnosis), ``named_correctly``
+(hidden-effect cases whose effect was named), ``false_discoveries`` (no-effect cases
+declared misspecified or given a name), ``wrong_names`` (hidden-effect cases given another
+effect's name), ``median_gap_ratio`` (gap_after / gap_before over the hidden-effect cases)
+and ``confusion`` (hidden → named → count).
+
+Example (the numbers in docs/benchmarks.md)::
+
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_diagnose.py --plugin pendulum \\
+        --seeds 5 --steps 16 --optimizer cma --render-size 48 --out /tmp/bench_diagnose
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Realistic effect strengths: (low, high) per effect parameter, drawn uniformly; a
+#: parameter listed with a sign choice is given a random sign.
+STRENGTHS: dict[str, dict[str, tuple[float, float]]] = {
+    "quadratic_drag": {"drag_quadratic": (0.8, 1.6)},
+    "wind_gusts": {"gust_intensity": (0.25, 0.35), "gust_timescale": (0.4, 1.0)},
+    "wind_shear": {"shear_exponent": (0.3, 0.45)},
+    "wind_yaw": {"wind_yaw_deg": (25.0, 40.0)},
+}
+SIGNED = {"wind_yaw_deg"}
+#: Base θ drawn from this central share of each parameter's normalised range.
+BASE_BOX = 0.6
+
+
+def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, render_size: int | None,
+                path: Path) -> dict[str, float]:
+    """Simulate, render and write one target; returns its true parameters."""
+    from physinfer.session import build_pipeline
+    from physinfer.video import write_video
+
+    rng = np.random.default_rng([seed, 2026])
+    pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
+    base_space = pipeline.phenomenon.parameter_space
+    truth = base_space.from_unit(rng.uniform(-BASE_BOX, BASE_BOX, len(base_space)))
+    if hidden:
+        for name, (lo, hi) in STRENGTHS[hidden].items():
+            value = float(rng.uniform(lo, hi))
+            truth[name] = value * (rng.choice([-1.0, 1.0]) if name in SIGNED else 1.0)
+    zeta = dict(pipeline.renderer.default_render_params)
+    if render_size is not None:
+        zeta[_size_key(zeta)] = render_size
+    clip = pipeline.renderer.render(pipeline.simulator.simulate(truth, seed=1000 + seed), zeta)
+    pipeline.renderer.close()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_video(path, clip)
+    return truth
+
+
+def _size_key(zeta: dict[str, Any]) -> str:
+    return "image_size" if "image_size" in zeta else "size"
+
+
+def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """Make one target and diagnose it."""
+    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    case_dir = Path(args.out) / f"{plugin}-{hidden or 'none'}-s{seed}"
+    truth_file = case_dir / "truth.json"
+    if truth_file.is_file():
+        truth = json.loads(truth_file.read_text())
+    else:
+        truth = make_target(registry, plugin, hidden, seed, args.render_size, case_dir / "target.mp4")
+        truth_file.write_text(json.dumps(truth))
+    render_set = {}
+    if args.render_size is not None:
+        probe = registry.phenomenon(plugin).make_renderer().default_render_params
+        render_set[_size_key(dict(probe))] = args.render_size
+    t0 = time.perf_counter()
+    report = run_diagnosis(
+        registry,
+        DiagnoseSettings(
+            plugin=plugin,
+            out=case_dir / "diagnosis",
+            target_path=case_dir / "target.mp4",
+            render_set=render_set,
+            steps=args.steps,
+            effect_steps=args.effect_steps,
+            optimizer=args.optimizer,
+            embedder=args.embedder,
+            seed=seed,
+            floor_samples=args.floor_samples,
+            videos=False,
+        ),
+    )
+    return {
+        "plugin": plugin,
+        "hidden": hidden,
+        "seed": seed,
+        "named": report["named_effect"],
+        "misspecified": report["misspecified"],
+        "gap_before": report["gap_before"],
+        "gap_after": report["gap_after"],
+        "gap_ratio": report["gap_ratio"],
+        "noise_floor": report["noise_floor"],
+        "null_scale": report["null_scale"],
+        "baseline_gap": report["baseline"]["gap"],
+        "candidates": {
+            c["effect"]: {"gap": c["gap"], "ratio": c["ratio"], "p_value": c["p_value"], "significant": c["significant"]}
+            for c in report["candidates"]
+        },
+        "truth": truth,
+        "wall_time_s": time.perf_counter() - t0,
+    }
+
+
+def summarise(cases: list[dict[str, Any]]) -> dict[str, Any]:
+    """The benchmark's headline numbers and confusion table."""
+    hidden_cases = [c for c in cases if c["hidden"]]
+    null_cases = [c for c in cases if not c["hidden"]]
+    confusion: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    for c in cases:
+        confusion[c["hidden"] or "none"][c["named"] or "none"] += 1
+    ratios = [c["gap_ratio"] for c in hidden_cases if c["gap_ratio"] is not None]
+    return {
+        "n_cases": len(cases),
+        "named_correctly": sum(c["named"] == c["hidden"] for c in hidden_cases),
+        "n_hidden": len(hidden_cases),
+        "wrong_names": sum(c["named"] not in (None, c["hidden"]) for c in hidden_cases),
+        "false_discoveries": sum(c["misspecified"] or c["named"] is not None for c in null_cases),
+        "n_null": len(null_cases),
+        "median_gap_ratio": statistics.median(ratios) if ratios else None,
+        "share_gap_halved": (sum(r <= 0.5 for r in ratios) / len(ratios)) if ratios else None,
+        "confusion": {k: dict(v) for k, v in confusion.items()},
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--plugin", default="pendulum")
+    parser.add_argument("--effects", nargs="*", default=None, help="hidden effects (default: all of the plugin's)")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=16)
+    parser.add_argument("--effect-steps", type=int, default=None)
+    parser.add_argument("--optimizer", default="cma")
+    parser.add_argument("--embedder", default=None)
+    parser.add_argument("--render-size", type=int, default=None)
+    parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
+    parser.add_argument("--out", default="/tmp/bench_diagnose")
+    args = parser.parse_args()
+
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    effects = args.effects if args.effects is not None else registry.effects_of(args.plugin)
+    hidden_list: list[str | None] = list(effects) + ([] if args.no_null else [None])
+    start = time.perf_counter()
+    cases = []
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for hidden in hidden_list:
+            case = run_case(args.plugin, hidden, seed, args)
+            print(json.dumps({k: case[k] for k in ("hidden", "seed", "named", "misspecified", "gap_ratio")}),
+                  file=sys.stderr, flush=True)
+            cases.append(case)
+    out = {
+        "plugin": args.plugin,
+        "settings": {k: v for k, v in vars(args).items()},
+        **summarise(cases),
+        "wall_time_s": time.perf_counter() - start,
+        "cases": cases,
+    }
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
