@@ -38,7 +38,7 @@ system-deps:
 	fi
 
 demo: install
-	$(BIN)/physinfer refine --plugin pendulum --out runs/demo
+	$(BIN)/physinfer refine --plugin flag --out runs/demo --overwrite
 
 test: install
 	$(BIN)/python -m pytest -q -p no:cacheprovider

@@ -1,0 +1,170 @@
+"""Accuracy and speed of ``physinfer refine`` on held-out synthetic targets.
+
+For each of ``--targets`` targets, θ is drawn uniformly in the normalised cube and ζ from
+the renderer's dataset distribution, both from seeds no dataset uses (``100_000 + i``);
+the target is simulated under its own seed (``200_000 + i``) while every refinement
+simulates under seed 0, so no target is the realisation any trial can reproduce — as with a
+real video. Each target is refined with every optimizer in ``--optimizers`` at the same
+budget, render parameters fixed to the target's (oracle ζ, as the paper).
+
+Prints one JSON object with, for the first optimizer (``ax`` by default):
+``wall_time_s`` (median over targets of one refinement, noise measurement included) and its
+split ``bo_s``, ``simulate_s``, ``render_s``, ``embed_s``, ``step_s`` (simulate + render +
+embed per step), ``median_wind_abs_error``, ``share_wind_within_0_5``,
+``median_area_weight_abs_error``, ``median_noise_ratio`` (gap / floor at the best fit), and
+``by_optimizer`` with the same accuracy keys for every optimizer. Each finished refinement is
+appended to ``--out/results.jsonl``, so an interrupted benchmark continues where it stopped.
+
+Usage::
+
+    PYOPENGL_PLATFORM=egl python benchmarks/bench_refine.py --plugin flag --steps 40 --targets 20 \
+        --optimizers ax,random,cma --out runs/bench_refine
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.io import atomic_write_json
+from physinfer.plugins import load_registry
+from physinfer.refine import RefineConfig, run_refinement
+from physinfer.roles import Target
+from physinfer.rundir import RunDirectory
+from physinfer.session import build_pipeline
+
+THETA_SEED, TARGET_SIM_SEED = 100_000, 200_000
+
+
+def make_target(pipeline: Any, index: int) -> Target:
+    """Held-out target ``index``: seeded θ, ζ and simulation seed."""
+    space = pipeline.simulator.parameter_space
+    rng = np.random.default_rng(THETA_SEED + index)
+    truth = space.from_unit(rng.uniform(-1.0, 1.0, len(space)))
+    zeta = pipeline.renderer.sample_render_params(rng)
+    trajectory = pipeline.simulator.simulate(truth, seed=TARGET_SIM_SEED + index)
+    clip = pipeline.renderer.render(trajectory, zeta)
+    return Target(clip=clip, truth=truth, render_params=zeta, description=f"held-out target {index}")
+
+
+def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, args: argparse.Namespace, out: Path) -> dict:
+    """One refinement; returns its row for ``results.jsonl``."""
+    config = RefineConfig(
+        steps=args.steps,
+        optimizer=optimizer,
+        seed=0,
+        noise_samples=args.noise_samples,
+        seeds_per_trial=args.seeds_per_trial,
+        floor_samples=args.floor_samples,
+    )
+    run_dir = RunDirectory(out)
+    info = {"plugin": args.plugin, "optimizer": optimizer, "seed": 0, "effects": [], "embedder": args.embedder,
+            "parameters": pipeline.simulator.parameter_space.to_dict(), "overwrite": True,
+            "seeds_per_trial": args.seeds_per_trial}
+    factory = registry.get("optimizers", optimizer).load()
+    start = time.perf_counter()
+    result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info)
+    wall = time.perf_counter() - start
+    floor = result.extra.get("noise_floor") or {}
+    return {
+        "optimizer": optimizer,
+        "wall_time_s": wall,
+        "bo_s": result.timings["optimizer_s"],
+        "simulate_s": result.timings["simulate_s"],
+        "render_s": result.timings["render_s"],
+        "embed_s": result.timings["embed_s"],
+        "abs_errors": result.abs_errors,
+        "best_distance": result.best_distance,
+        "noise_ratio": floor.get("ratio"),
+        "observation_sem": result.extra.get("observation_sem"),
+        "n_failed": result.n_failed,
+    }
+
+
+def accuracy(rows: list[dict]) -> dict[str, Any]:
+    """Median errors and the share of wind errors within 0.5 m/s."""
+    wind = [r["abs_errors"]["wind_speed"] for r in rows if "wind_speed" in r["abs_errors"]]
+    area = [r["abs_errors"]["area_weight"] for r in rows if "area_weight" in r["abs_errors"]]
+    ratios = [r["noise_ratio"] for r in rows if r.get("noise_ratio") is not None]
+    return {
+        "n_targets": len(rows),
+        "median_wind_abs_error": statistics.median(wind) if wind else None,
+        "share_wind_within_0_5": float(np.mean(np.asarray(wind) <= 0.5)) if wind else None,
+        "median_area_weight_abs_error": statistics.median(area) if area else None,
+        "median_noise_ratio": statistics.median(ratios) if ratios else None,
+        "median_wall_time_s": statistics.median(r["wall_time_s"] for r in rows),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--plugin", default="flag")
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--targets", type=int, default=20)
+    parser.add_argument("--optimizers", default="ax,random,cma")
+    parser.add_argument("--embedder", default=None, help="default: the phenomenon's")
+    parser.add_argument("--weights", default=None, help="embedder weights (default: shipped)")
+    parser.add_argument("--noise-samples", type=int, default=3)
+    parser.add_argument("--seeds-per-trial", type=int, default=1)
+    parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--out", default="runs/bench_refine")
+    args = parser.parse_args()
+
+    registry, _ = load_registry()
+    pipeline = build_pipeline(registry, args.plugin, embedder=args.embedder,
+                              weights=Path(args.weights) if args.weights else None)
+    args.embedder = args.embedder or pipeline.phenomenon.default_embedder
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "results.jsonl"
+    settings = {k: v for k, v in vars(args).items() if k != "out"}
+    done: dict[tuple[int, str], dict] = {}
+    if log.exists():
+        for line in log.read_text().splitlines():
+            row = json.loads(line)
+            if row.get("settings") == settings:
+                done[(row["target"], row["optimizer"])] = row
+    optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
+    for index in range(args.targets):
+        target = None
+        for optimizer in optimizers:
+            if (index, optimizer) in done:
+                continue
+            target = target or make_target(pipeline, index)
+            row = refine_one(pipeline, registry, target, optimizer, args, out / f"t{index:02d}-{optimizer}")
+            row.update(target=index, settings=settings, truth={k: target.truth[k] for k in ("wind_speed", "area_weight") if k in target.truth})
+            with log.open("a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            done[(index, optimizer)] = row
+            print(f"target {index} {optimizer}: wind err {row['abs_errors'].get('wind_speed', float('nan')):.3f} "
+                  f"wall {row['wall_time_s']:.1f} s", file=__import__("sys").stderr, flush=True)
+    pipeline.renderer.close()
+
+    by_optimizer = {o: accuracy([r for r in done.values() if r["optimizer"] == o]) for o in optimizers}
+    first = [r for r in done.values() if r["optimizer"] == optimizers[0]]
+    phases = {k: statistics.median(r[k] for r in first) for k in ("wall_time_s", "bo_s", "simulate_s", "render_s", "embed_s")}
+    report = {
+        "benchmark": "refine",
+        "plugin": args.plugin,
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}",
+        "settings": settings,
+        **phases,
+        "step_s": (phases["simulate_s"] + phases["render_s"] + phases["embed_s"]) / args.steps,
+        **{k: v for k, v in by_optimizer[optimizers[0]].items() if k != "median_wall_time_s"},
+        "by_optimizer": by_optimizer,
+        "load_average": os.getloadavg()[0],
+    }
+    atomic_write_json(out / "summary.json", report)
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()
