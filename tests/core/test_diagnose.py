@@ -196,3 +196,72 @@ def test_model_file_round_trip_and_checks(tmp_path: Path):
         read_model(tmp_path / "bad.json")
     with pytest.raises(UserInputError, match="no such file"):
         read_model(tmp_path / "missing.json")
+
+
+# ---------------------------------------------------------------------- end to end (pendulum)
+
+
+def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
+    from physinfer.plugins import load_registry
+    from physinfer.session import build_pipeline
+    from physinfer.video import write_video
+
+    registry, _ = load_registry()
+    pipeline = build_pipeline(registry, "pendulum", effects=[effect] if effect else [], embedder="")
+    truth = {"length": 1.1, "damping": 0.05, "amplitude": 50.0}
+    if effect:
+        truth["drag_quadratic"] = 1.0
+    clip = pipeline.renderer.render(pipeline.simulator.simulate(truth), {"size": 48})
+    pipeline.renderer.close()
+    return write_video(tmp_path / f"{effect or 'none'}.mp4", clip)
+
+
+def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
+    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    settings = DiagnoseSettings(
+        plugin="pendulum", out=tmp_path / f"diag-{target.stem}", target_path=target, render_set={"size": 48},
+        steps=steps, optimizer=optimizer, floor_samples=4, videos=False, **kw,
+    )
+    return run_diagnosis(registry, settings)
+
+
+def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
+    """A tiny budget: every output is written, the JSON has its keys, a re-run resumes."""
+    target = _pendulum_target(tmp_path, "quadratic_drag")
+    report = _diagnose(tmp_path, target, steps=2, optimizer="random")
+    for key in ("misspecified", "named_effect", "gap_before", "gap_after", "noise_floor", "candidates", "regions"):
+        assert key in report
+    (cand,) = report["candidates"]
+    assert cand["effect"] == "quadratic_drag"
+    assert set(cand) >= {"effect", "gap", "improvement", "significant"}
+    assert report["noise_floor"] == pytest.approx(0.0, abs=1e-9)  # the pendulum is deterministic
+    assert len(report["regions"]) == 16 and report["regions"][0]["score"] >= report["regions"][-1]["score"]
+    out = tmp_path / "diag-quadratic_drag"
+    for name in ("diagnosis.json", "model.json", "maps.png", "gaps.png"):
+        assert (out / name).is_file()
+    # The augmented run's first trial is the warm start: the baseline's best with the drag off.
+    first = json.loads((out / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()[0])
+    assert first["params"]["drag_quadratic"] == 0.0
+    assert first["params"]["length"] == pytest.approx(report["baseline"]["best_params"]["length"])
+    again = _diagnose(tmp_path, target, steps=2, optimizer="random")
+    assert again["gap_before"] == report["gap_before"]
+    model = read_model(out / "model.json")
+    assert model.plugin == "pendulum"
+
+
+@pytest.mark.slow
+def test_hidden_drag_is_named_and_the_gap_shrinks(tmp_path: Path):
+    report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=16, optimizer="ax")
+    assert report["misspecified"]
+    assert report["named_effect"] == "quadratic_drag"
+    assert report["gap_after"] <= 0.5 * report["gap_before"]
+
+
+@pytest.mark.slow
+def test_no_effect_is_not_misspecified(tmp_path: Path):
+    report = _diagnose(tmp_path, _pendulum_target(tmp_path, None), steps=16, optimizer="ax")
+    assert not report["misspecified"]
+    assert report["named_effect"] is None

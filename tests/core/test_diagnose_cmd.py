@@ -1,0 +1,62 @@
+"""Tests of the ``physinfer diagnose`` command and of ``physinfer refine --model``."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+BIN = Path(sys.executable).parent / "physinfer"
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=600)
+
+
+def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
+    target = tmp_path / "drag.mp4"
+    sim = _run("simulate", "--plugin", "pendulum", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.0",
+               "--render-set", "size=48", "--out", str(target))
+    assert sim.returncode == 0, sim.stderr
+    out = tmp_path / "diag"
+    proc = _run("diagnose", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48",
+                "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video",
+                "--out", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1
+    report = json.loads(lines[0])
+    assert report["candidates"][0]["effect"] == "quadratic_drag"
+    assert isinstance(report["misspecified"], bool)
+    # Hand-edit the model file to the augmented model: refine --model switches drag in and
+    # starts from the file's values.
+    model = json.loads((out / "model.json").read_text())
+    model["effects"] = ["quadratic_drag"]
+    model["values"] = {**report["baseline"]["best_params"], "drag_quadratic": 0.7}
+    (out / "model.json").write_text(json.dumps(model))
+    run_dir = tmp_path / "refined"
+    proc = _run("refine", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48",
+                "--model", str(out / "model.json"), "--steps", "2", "--optimizer", "random",
+                "--out", str(run_dir), "--json")
+    assert proc.returncode == 0, proc.stderr
+    first = json.loads((run_dir / "trials.jsonl").read_text().splitlines()[0])
+    assert first["params"]["drag_quadratic"] == 0.7
+    assert json.loads((run_dir / "run.json").read_text())["effects"] == ["quadratic_drag"]
+
+
+def test_refine_model_errors(tmp_path: Path):
+    proc = _run("refine", "--plugin", "pendulum", "--model", str(tmp_path / "none.json"), "--steps", "1",
+                "--out", str(tmp_path / "r"))
+    assert proc.returncode == 2 and "no such file" in proc.stderr
+    bad = tmp_path / "flag_model.json"
+    bad.write_text(json.dumps({"format": "physinfer-model/1", "plugin": "flag", "effects": [], "parameters": [],
+                               "values": {}}))
+    proc = _run("refine", "--plugin", "pendulum", "--model", str(bad), "--steps", "1", "--out", str(tmp_path / "r"))
+    assert proc.returncode == 2 and "not of --plugin 'pendulum'" in proc.stderr
+
+
+def test_diagnose_refuses_too_few_floor_samples(tmp_path: Path):
+    proc = _run("diagnose", "--plugin", "pendulum", "--floor-samples", "2", "--out", str(tmp_path / "d"), "--json")
+    assert proc.returncode == 2
+    assert "floor-samples" in json.loads(proc.stdout)["error"]
