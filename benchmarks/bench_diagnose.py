@@ -37,8 +37,11 @@ STRENGTHS: dict[str, dict[str, tuple[float, float]]] = {
     "wind_yaw": {"wind_yaw_deg": (25.0, 40.0)},
 }
 SIGNED = {"wind_yaw_deg"}
-#: Base θ drawn from this central share of each parameter's normalised range.
+#: Base θ drawn from this central share of each parameter's normalised range ...
 BASE_BOX = 0.6
+#: ... except these, drawn from a physical range: drag grows with the swing's speed, so the
+#: pendulum starts high enough for it to matter (below ~30° linear damping mimics it).
+BASE_RANGES: dict[str, tuple[float, float]] = {"amplitude": (35.0, 55.0)}
 
 
 class FixedParameters:
@@ -98,6 +101,9 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
     base_space = pipeline.phenomenon.parameter_space  # for flag_lite: without the fixed bending
     truth = base_space.from_unit(rng.uniform(-BASE_BOX, BASE_BOX, len(base_space)))
+    for name, (lo, hi) in BASE_RANGES.items():
+        if name in truth:
+            truth[name] = float(rng.uniform(lo, hi))
     if hidden:
         for name, (lo, hi) in STRENGTHS[hidden].items():
             value = float(rng.uniform(lo, hi))

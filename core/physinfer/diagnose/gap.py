@@ -48,6 +48,7 @@ def measure_gap(
     *,
     seeds: Sequence[int],
     cache_dir: Path | None = None,
+    cache_name: str = GAP_FILE,
 ) -> NoiseFloor:
     """Re-simulate ``params`` under ``seeds``; distances among them and to the target.
 
@@ -57,8 +58,9 @@ def measure_gap(
         render_params: ζ of the target.
         target_embedding: ``(D,)`` embedding of the target.
         seeds: Re-simulation seeds (at least two).
-        cache_dir: Directory for ``gap.json``; a cached measurement of the same θ and
+        cache_dir: Directory for the cache file; a cached measurement of the same θ and
             seeds is returned instead of re-simulating.
+        cache_name: Name of the cache file in ``cache_dir``.
 
     Returns:
         The :class:`~physinfer.noise.NoiseFloor`; its ``gap`` and ``floor`` are medians.
@@ -67,7 +69,7 @@ def measure_gap(
         SimulationFailed: when fewer than two re-simulations succeed.
     """
     key = {"params": {k: float(v) for k, v in params.items()}, "seeds": [int(s) for s in seeds]}
-    path = None if cache_dir is None else Path(cache_dir) / GAP_FILE
+    path = None if cache_dir is None else Path(cache_dir) / cache_name
     if path is not None and path.is_file():
         stored = json.loads(path.read_text())
         if stored.get("key") == key:

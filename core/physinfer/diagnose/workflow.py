@@ -117,6 +117,12 @@ class Stage:
     result: RefineResult
     gap: NoiseFloor
     n_params: int = 0
+    params: dict[str, float] | None = None
+
+    @property
+    def best_params(self) -> dict[str, float]:
+        """The θ this stage stands for (the refinement's best, or its ablated version)."""
+        return dict(self.params) if self.params is not None else dict(self.result.best_params)
 
 
 def run_stage(
@@ -231,9 +237,10 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
     common = {"registry": registry, "settings": settings}
 
-    def gap_of(pipeline: Pipeline, params: Mapping[str, float], stage: str) -> NoiseFloor:
+    def gap_of(pipeline: Pipeline, params: Mapping[str, float], stage: str, cache_name: str = "gap.json") -> NoiseFloor:
         return measure_gap(
-            pipeline, params, target.render_params, target_embedding, seeds=seeds, cache_dir=settings.out / stage
+            pipeline, params, target.render_params, target_embedding, seeds=seeds, cache_dir=settings.out / stage,
+            cache_name=cache_name,
         )
 
     # 1. The baseline.
@@ -272,6 +279,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     control = run_stage(
         "control", base, target, steps=effect_steps, start=baseline.best_params, target_label=target_label, **common
     )
+    base_space = base.simulator.parameter_space
     stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
     for name, effect in effect_objs.items():
         say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
@@ -290,7 +298,17 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
                   n_params=len(effect.parameter_space))
         )
 
-    before = stages[0]
+    # An augmented run may owe its better fit to its base parameters, not to its effect:
+    # its best θ with the effect switched off is a baseline fit too, and the best baseline
+    # fit found by any stage is what an effect must beat (ablation).
+    ablated = []
+    for stage in stages[1:]:
+        off = {k: v for k, v in warm_start(stage.result.best_params, stage.pipeline.effects).items() if k in base_space}
+        ablated.append(
+            Stage(f"{stage.label} off", base, stage.result,
+                  gap_of(base, off, f"effect-{stage.label}", cache_name="gap_effect_off.json"), params=off)
+        )
+    before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
     gap_before = float(before.gap.gap)
     candidates = []
     for stage in stages[1:]:
@@ -349,13 +367,13 @@ def _outputs(
     from physinfer.diagnose.model import write_model
 
     out = settings.out
-    fit_before = _clip(before.pipeline, before.result.best_params, target, settings.seed)
+    fit_before = _clip(before.pipeline, before.best_params, target, settings.seed)
     numbers, t_maps, b_maps = localise(target.clip, fit_before, settings.localise)
     rows = [("target", t_maps), ("baseline fit", b_maps)]
     clips = [target.clip, fit_before]
     after_numbers = None
     if named:
-        fit_after = _clip(after.pipeline, after.result.best_params, target, settings.seed)
+        fit_after = _clip(after.pipeline, after.best_params, target, settings.seed)
         after_numbers, _, a_maps = localise(target.clip, fit_after, settings.localise)
         rows.append((f"+ {named}", a_maps))
         clips.append(fit_after)
@@ -363,7 +381,11 @@ def _outputs(
         "maps": str(plot_maps(rows, out / "maps.png")),
         "gaps": str(
             plot_gaps(
-                [{"label": s.label, "gap": float(s.gap.gap), "distances": list(s.gap.to_target or [])} for s in stages],
+                [
+                    {"label": s.label if s is not before else "baseline (best)", "gap": float(s.gap.gap),
+                     "distances": list(s.gap.to_target or [])}
+                    for s in [before, *stages[1:]]
+                ],
                 floor=before.gap.floor,
                 scale=scale,
                 threshold=verdict["threshold"],
@@ -383,7 +405,7 @@ def _outputs(
         plugin=settings.plugin,
         effects=[e.name for e in after.pipeline.effects],
         space=space,
-        values=after.result.best_params,
+        values=after.best_params,
         gap=float(after.gap.gap),
         source=after.result.run_dir,
     )
@@ -408,7 +430,8 @@ def _outputs(
             **gap_numbers(gap0),
             "run_dir": baseline.run_dir,
         },
-        "control": {"best_params": before.result.best_params, **gap_numbers(before.gap), "run_dir": before.result.run_dir},
+        "control": {"best_params": stages[0].best_params, **gap_numbers(stages[0].gap), "run_dir": stages[0].result.run_dir},
+        "best_baseline": {"source": before.label, "best_params": before.best_params, **gap_numbers(before.gap)},
         "candidates": candidates,
         "regions": numbers["regions"],
         "localisation": numbers["global"],
@@ -419,7 +442,7 @@ def _outputs(
         "videos": videos,
         "settings": {
             "steps": baseline.n_trials,
-            "effect_steps": before.result.n_trials,
+            "effect_steps": stages[0].result.n_trials,
             "optimizer": settings.optimizer,
             "seed": settings.seed,
             "floor_samples": settings.floor_samples,
