@@ -11,9 +11,11 @@ bootstrap — the posterior-predictive check of a model that is right by constru
 
 **An effect counts** (is *significant*) when all three hold:
 
-1. its re-simulation distances to the target are smaller than those of the baseline
-   refined with the same extra budget from the same warm start (one-sided Mann–Whitney U
-   test on the ``K`` distances each, ``p < alpha``) — the improvement is not seed noise;
+1. its re-simulation distances to the target are smaller than those of the best baseline
+   fit (the baseline refined with the same extra budget from the same warm start, or an
+   augmented run's best θ with its effect switched off, whichever is closer; one-sided
+   Mann–Whitney U test on the ``K`` distances each, ``p < alpha``) — the improvement is
+   neither seed noise nor owed to the base parameters;
 2. the improvement exceeds the null scale — it is not what noise and the optimizer
    leave anyway;
 3. it pays for its extra parameters: ``gap_effect ≤ per_parameter_factor^k · gap_before``
