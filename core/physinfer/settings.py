@@ -1,0 +1,230 @@
+"""Typed settings from loose input: frozen dataclasses built from CLI strings or JSON.
+
+Plugins describe their settings (render parameters ζ, simulator configurations) as frozen
+dataclasses with a ``validate()`` method. Their values arrive from the command line as
+strings (``--render-set image_size=120,160``), from JSON as numbers and lists, or from
+Python; :func:`settings_from_mapping` converts each value to its field's annotated type,
+refuses unknown keys, builds the dataclass and validates it, so that every mistake
+surfaces as a :class:`~physinfer.errors.UserInputError` naming the key. The helpers
+:func:`check_range` and :func:`require` serve the ``validate()`` methods themselves.
+
+Supported field types: ``bool``, ``int`` (whole numbers, also given as ``"3"`` or
+``3.0``), ``float``, ``str`` (a path is taken as its string), fixed-length tuples such as
+``tuple[float, float, float]`` (a list, or a comma-separated string), ``X | None`` (None
+from ``None``, ``"none"``, ``"auto"`` or ``""``) and a scalar-or-tuple union such as
+``int | tuple[int, int]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import os
+import types
+import typing
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any, Protocol, TypeVar
+
+from physinfer.errors import UserInputError
+
+TRUE_WORDS = frozenset({"1", "true", "yes", "on"})
+"""Strings read as ``True`` for a bool setting (case-insensitive)."""
+
+FALSE_WORDS = frozenset({"0", "false", "no", "off"})
+"""Strings read as ``False`` for a bool setting (case-insensitive)."""
+
+NONE_WORDS = frozenset({"none", "auto", ""})
+"""Strings read as ``None`` for an optional setting (case-insensitive)."""
+
+
+class Validated(Protocol):
+    """A settings dataclass: checks its own values."""
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` for the first bad value."""
+
+
+SettingsT = TypeVar("SettingsT", bound=Validated)
+
+Converter = Callable[[Any], Any]
+
+
+def check_range(key: str, value: float, low: float, high: float) -> None:
+    """Refuse a value outside ``[low, high]`` (or not finite).
+
+    Raises:
+        UserInputError: naming ``key``, the value and the allowed interval.
+    """
+    if not (math.isfinite(value) and low <= value <= high):
+        raise UserInputError(f"{key}={value:g} is out of range; choose a value in [{low:g}, {high:g}]")
+
+
+def require(checks: Iterable[tuple[bool, str]]) -> None:
+    """Raise the message of the first failed check: ``validate()`` as a table of conditions.
+
+    Args:
+        checks: ``(condition, message)`` pairs, in the order they should be reported.
+
+    Raises:
+        UserInputError: with the first message whose condition is false.
+    """
+    for ok, message in checks:
+        if not ok:
+            raise UserInputError(message)
+
+
+def whole_number(value: Any) -> int:
+    """An int from an int-valued number or string (the CLI passes numbers as floats).
+
+    Raises:
+        ValueError: for a fraction or text that is not a number.
+    """
+    number = float(value)
+    if not number.is_integer():
+        raise ValueError(f"{value!r} is not a whole number")
+    return int(number)
+
+
+def parse_bool(value: Any) -> bool:
+    """A bool from a word (:data:`TRUE_WORDS`, :data:`FALSE_WORDS`) or any Python value.
+
+    Raises:
+        ValueError: for a string that is none of the words.
+    """
+    if isinstance(value, str):
+        word = value.lower()
+        if word not in TRUE_WORDS | FALSE_WORDS:
+            raise ValueError("expected true or false")
+        return word in TRUE_WORDS
+    return bool(value)
+
+
+def parse_str(value: Any) -> str:
+    """A string from a string or a path.
+
+    Raises:
+        ValueError: for anything else (a number, a list).
+    """
+    if not isinstance(value, (str, os.PathLike)):
+        raise ValueError("expected a string")
+    return os.fspath(value)
+
+
+def converter_for(annotation: Any) -> Converter:
+    """The function that converts a loose value to ``annotation`` (a field's resolved type).
+
+    The converters raise ``ValueError`` or ``TypeError`` for a value they cannot convert.
+
+    Raises:
+        TypeError: for an annotation this module does not support (a programming error,
+            reported when the settings are built, not a user mistake).
+    """
+    simple: dict[Any, Converter] = {bool: parse_bool, int: whole_number, float: float, str: parse_str}
+    if annotation in simple:
+        return simple[annotation]
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin is tuple and args and Ellipsis not in args:
+        return _tuple_converter([converter_for(a) for a in args])
+    if origin in (typing.Union, types.UnionType):
+        options = [a for a in args if a is not type(None)]
+        optional = len(options) < len(args)
+        inner = converter_for(options[0]) if len(options) == 1 else _scalar_or_tuple(options)
+        return _optional(inner) if optional else inner
+    raise TypeError(f"no conversion for settings of type {annotation!r}")
+
+
+def _tuple_converter(items: list[Converter]) -> Converter:
+    def convert(value: Any) -> tuple[Any, ...]:
+        parts = value.split(",") if isinstance(value, str) else list(value)
+        if len(parts) != len(items):
+            raise ValueError(f"expected {len(items)} comma-separated values")
+        return tuple(item(part) for item, part in zip(items, parts, strict=True))
+
+    return convert
+
+
+def _optional(inner: Converter) -> Converter:
+    def convert(value: Any) -> Any:
+        if value is None or isinstance(value, str) and value.lower() in NONE_WORDS:
+            return None
+        return inner(value)
+
+    return convert
+
+
+def _scalar_or_tuple(options: list[Any]) -> Converter:
+    """``A | tuple[...]``: a comma-separated string or a sequence is the tuple, else the scalar."""
+    tuples = [a for a in options if typing.get_origin(a) is tuple]
+    scalars = [a for a in options if typing.get_origin(a) is not tuple]
+    if len(tuples) != 1 or len(scalars) != 1:
+        raise TypeError(f"no conversion for settings of type {' | '.join(map(repr, options))}")
+    as_tuple, as_scalar = converter_for(tuples[0]), converter_for(scalars[0])
+
+    def convert(value: Any) -> Any:
+        is_sequence = "," in value if isinstance(value, str) else isinstance(value, Iterable)
+        return as_tuple(value) if is_sequence else as_scalar(value)
+
+    return convert
+
+
+@functools.cache
+def field_converters(cls: type) -> Mapping[str, Converter]:
+    """A converter per field of the dataclass ``cls``, from its resolved type hints (cached).
+
+    Raises:
+        TypeError: if ``cls`` is not a dataclass or a field's type is not supported.
+    """
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls!r} is not a dataclass")
+    hints = typing.get_type_hints(cls)
+    return types.MappingProxyType({f.name: converter_for(hints[f.name]) for f in dataclasses.fields(cls)})
+
+
+def settings_from_mapping(
+    cls: type[SettingsT], values: Mapping[str, Any] | None, *, noun: str = "setting", owner: str = ""
+) -> SettingsT:
+    """Build and validate the settings dataclass ``cls``; missing keys take their defaults.
+
+    Args:
+        cls: A dataclass with a ``validate()`` method.
+        values: Field values, loose (strings, numbers, lists) or already typed; None is
+            the same as an empty mapping.
+        noun: What one key is called in messages, e.g. ``"render parameter"``.
+        owner: Who the settings belong to, e.g. ``"flag"``, named in the unknown-key
+            message (``"unknown flag render parameter 'zoom'; known keys: ..."``).
+
+    Returns:
+        The validated instance.
+
+    Raises:
+        UserInputError: an unknown key, a value of the wrong type (``"render parameter
+            fov_deg='wide' has the wrong type (...)"``), or whatever ``validate()`` refuses.
+        TypeError: ``cls`` has a field type this module cannot convert to.
+    """
+    values = dict(values or {})
+    converters = field_converters(cls)
+    unknown = sorted(set(values) - set(converters))
+    if unknown:
+        subject = " ".join(word for word in ("unknown", owner, noun) if word)
+        raise UserInputError(f"{subject} {unknown[0]!r}; known keys: {', '.join(sorted(converters))}")
+    typed = {}
+    for key, value in values.items():
+        try:
+            typed[key] = converters[key](value)
+        except (TypeError, ValueError) as exc:
+            raise UserInputError(f"{noun} {key}={value!r} has the wrong type ({exc})") from None
+    settings = cls(**typed)
+    settings.validate()
+    return settings
+
+
+def settings_to_dict(settings: Any) -> dict[str, Any]:
+    """The fields of a settings dataclass as a JSON-friendly dict (tuples become lists).
+
+    :func:`settings_from_mapping` of the result gives the settings back.
+    """
+    return {
+        name: list(value) if isinstance(value, tuple) else value
+        for name, value in dataclasses.asdict(settings).items()
+    }
