@@ -22,19 +22,19 @@ of that axis (and of the image plane, whatever the elevation).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.rendering import OffscreenContext, look_at, use_headless_gl
 from physinfer.roles import Renderer
+from physinfer.settings import check_range, settings_from_mapping, settings_to_dict
 from physinfer.types import Clip, Trajectory
 from physinfer_flag.backgrounds import BACKGROUND_NAMES, background_image, list_background_images
 from physinfer_flag.textures import FLAG_NAMES, flag_texture
@@ -107,41 +107,19 @@ class FlagRenderParams:
             UserInputError: an unknown key, a value of the wrong type, or a value out of
                 range; the message names the key.
         """
-        zeta = dict(zeta or {})
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(zeta) - known)
-        if unknown:
-            raise UserInputError(
-                f"unknown flag render parameter {unknown[0]!r}; known keys: {', '.join(sorted(known))}"
-            )
-        values = {name: _coerce(name, value) for name, value in zeta.items()}
-        params = cls(**values)
-        params.validate()
-        return params
+        return settings_from_mapping(cls, zeta, noun="render parameter", owner="flag")
 
     def validate(self) -> None:
         """Check every value; raises :class:`UserInputError` naming the offending key."""
-        height, width = self.size
-        if not (16 <= height <= 4096 and 16 <= width <= 4096):
-            raise UserInputError(f"image_size={self.image_size!r}: each side must be 16 to 4096 pixels")
+        check_view(self)
         if self.camera_distance is not None and not (0 < self.camera_distance < 1e4):
             raise UserInputError(f"camera_distance={self.camera_distance}: give a positive distance in metres or None")
-        _check_range("framing", self.framing, 0.2, 10.0)
         if abs(self.camera_azimuth_deg) > MAX_WIND_CAMERA_ANGLE_DEG:
             raise UserInputError(
                 f"camera_azimuth_deg={self.camera_azimuth_deg:g}: the angle between the wind direction "
                 f"and the camera axis must be at most {MAX_WIND_CAMERA_ANGLE_DEG:g}° (as in the paper); "
                 f"choose camera_azimuth_deg in [-{MAX_WIND_CAMERA_ANGLE_DEG:g}, {MAX_WIND_CAMERA_ANGLE_DEG:g}]"
             )
-        _check_range("camera_elevation_deg", self.camera_elevation_deg, -45.0, 45.0)
-        if not (5.0 < self.fov_deg < 120.0):
-            raise UserInputError(f"fov_deg={self.fov_deg:g}: the field of view must lie between 5 and 120 degrees")
-        if len(self.light_direction) != 3 or not np.all(np.isfinite(self.light_direction)) or (
-            np.linalg.norm(self.light_direction) < 1e-9
-        ):
-            raise UserInputError(f"light_direction={self.light_direction!r}: give a non-zero 3-vector")
-        _check_range("light_intensity", self.light_intensity, 0.0, 100.0)
-        _check_range("ambient_intensity", self.ambient_intensity, 0.0, 1.0)
         if self.texture.lower() not in FLAG_NAMES:
             raise UserInputError(f"texture={self.texture!r} is unknown; choose one of: {', '.join(FLAG_NAMES)}")
         if self.background not in BACKGROUND_NAMES and not Path(self.background).expanduser().is_file():
@@ -153,69 +131,60 @@ class FlagRenderParams:
     @property
     def size(self) -> tuple[int, int]:
         """``(H, W)`` of the output frames."""
-        if isinstance(self.image_size, int):
-            return self.image_size, self.image_size
-        return int(self.image_size[0]), int(self.image_size[1])
+        return frame_size(self.image_size)
 
     def to_dict(self) -> dict[str, Any]:
         """The ζ dict (JSON-friendly: tuples become lists)."""
-        return {
-            name: list(value) if isinstance(value, tuple) else value
-            for name, value in dataclasses.asdict(self).items()
-        }
+        return settings_to_dict(self)
 
 
-def _check_range(key: str, value: float, low: float, high: float) -> None:
-    if not (math.isfinite(value) and low <= value <= high):
-        raise UserInputError(f"{key}={value:g} is out of range; choose a value in [{low:g}, {high:g}]")
+class SheetView(Protocol):
+    """The ζ keys every cloth renderer of this plugin family shares (camera, light, size).
+
+    :class:`FlagRenderParams` has them, and so do the render parameters of plugins that
+    reuse this renderer's machinery (the hanging cloth's).
+    """
+
+    image_size: int | tuple[int, int]
+    framing: float
+    camera_azimuth_deg: float
+    camera_elevation_deg: float
+    fov_deg: float
+    light_direction: tuple[float, float, float]
+    light_intensity: float
+    ambient_intensity: float
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(H, W)`` of the output frames."""
 
 
-def _whole(value: Any) -> int:
-    """An int from an int-valued number or string (the CLI passes numbers as floats)."""
-    number = float(value)
-    if not number.is_integer():
-        raise ValueError(f"{value!r} is not a whole number of pixels")
-    return int(number)
+def frame_size(image_size: int | tuple[int, int]) -> tuple[int, int]:
+    """``(H, W)`` from ζ's ``image_size``: one int for a square, or ``(H, W)``."""
+    if isinstance(image_size, int):
+        return image_size, image_size
+    return int(image_size[0]), int(image_size[1])
 
 
-_TRUE = {"1", "true", "yes", "on"}
-_FALSE = {"0", "false", "no", "off"}
+def check_view(params: SheetView) -> None:
+    """Check the shared ζ keys (all but the azimuth, whose limits differ by scene).
 
-
-def _coerce(key: str, value: Any) -> Any:
-    """Convert a ζ value (maybe a string from the command line, or JSON) to its field's type."""
-    try:
-        if key == "image_size":
-            if isinstance(value, str):
-                value = value.split(",") if "," in value else float(value)
-            if isinstance(value, (int, float, np.number)):
-                return _whole(value)
-            parts = list(value)
-            if len(parts) != 2:
-                raise ValueError("expected one int or two (H, W)")
-            return _whole(parts[0]), _whole(parts[1])
-        if key == "camera_distance":
-            if value is None or isinstance(value, str) and value.lower() in {"none", "auto", ""}:
-                return None
-            return float(value)
-        if key == "light_direction":
-            parts = value.split(",") if isinstance(value, str) else list(value)
-            if len(parts) != 3:
-                raise ValueError("expected three numbers")
-            return tuple(float(p) for p in parts)
-        if key in {"texture", "background"}:
-            if not isinstance(value, (str, Path)):
-                raise ValueError("expected a string")
-            return str(value)
-        if key == "pole":
-            if isinstance(value, str):
-                if value.lower() not in _TRUE | _FALSE:
-                    raise ValueError("expected true or false")
-                return value.lower() in _TRUE
-            return bool(value)
-        return float(value)
-    except (TypeError, ValueError) as exc:
-        raise UserInputError(f"render parameter {key}={value!r} has the wrong type ({exc})") from None
+    Raises:
+        UserInputError: naming the first offending key and its valid range.
+    """
+    height, width = params.size
+    if not (16 <= height <= 4096 and 16 <= width <= 4096):
+        raise UserInputError(f"image_size={params.image_size!r}: each side must be 16 to 4096 pixels")
+    check_range("framing", params.framing, 0.2, 10.0)
+    check_range("camera_elevation_deg", params.camera_elevation_deg, -45.0, 45.0)
+    if not (5.0 < params.fov_deg < 120.0):
+        raise UserInputError(f"fov_deg={params.fov_deg:g}: the field of view must lie between 5 and 120 degrees")
+    if len(params.light_direction) != 3 or not np.all(np.isfinite(params.light_direction)) or (
+        np.linalg.norm(params.light_direction) < 1e-9
+    ):
+        raise UserInputError(f"light_direction={params.light_direction!r}: give a non-zero 3-vector")
+    check_range("light_intensity", params.light_intensity, 0.0, 100.0)
+    check_range("ambient_intensity", params.ambient_intensity, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -254,7 +223,7 @@ def measure_flag(trajectory: Trajectory) -> FlagGeometry:
         UserInputError: ``extras["uv"]`` or ``extras["pole"]`` has the wrong shape.
     """
     first = trajectory.vertices[0].astype(np.float64)
-    uv = _texture_coordinates(trajectory).astype(np.float64)
+    uv = texture_coordinates(trajectory).astype(np.float64)
     length, height = _sheet_size(first, uv, trajectory.faces)
     hoist = np.flatnonzero(uv[:, 0] <= uv[:, 0].min() + 1e-3)
     hoist_top = first[hoist[np.argmax(uv[hoist, 1])]]
@@ -277,14 +246,19 @@ def _sheet_size(positions: np.ndarray, uv: np.ndarray, faces: np.ndarray) -> tup
     return length, height
 
 
-def _texture_coordinates(trajectory: Trajectory) -> np.ndarray:
+def texture_coordinates(trajectory: Trajectory) -> np.ndarray:
+    """``(V, 2)`` float32 uv of a sheet: ``extras["uv"]``, or the first frame projected on x–z.
+
+    Raises:
+        UserInputError: ``extras["uv"]`` is not ``(V, 2)``.
+    """
     n_vertices = trajectory.vertices.shape[1]
     if "uv" in trajectory.extras:
         uv = np.asarray(trajectory.extras["uv"], dtype=np.float32)
         if uv.shape != (n_vertices, 2):
             raise UserInputError(f"trajectory extras['uv'] must be ({n_vertices}, 2), got {uv.shape}")
         return uv
-    # No uv: project the first frame onto the xz plane, hoist (min x) to fly, bottom to top.
+    # No uv: project the first frame onto the xz plane, min x to max x, bottom to top.
     first = trajectory.vertices[0]
     lo, span = first.min(axis=0), np.maximum(np.ptp(first, axis=0), 1e-9)
     return np.stack([(first[:, 0] - lo[0]) / span[0], (first[:, 2] - lo[2]) / span[2]], axis=1).astype(np.float32)
@@ -380,21 +354,13 @@ class FlagRenderer(Renderer):
                 trajectory without frames or with non-finite positions.
         """
         params = FlagRenderParams.from_mapping(render_params)
-        if trajectory.n_frames == 0:
-            raise UserInputError("the trajectory has no frames: nothing to render")
-        if not trajectory.is_finite():
-            raise UserInputError("the trajectory has NaN or infinite vertex positions; it cannot be rendered")
+        check_renderable(trajectory)
         height, width = params.size
         geometry = measure_flag(trajectory)
         sheet = DoubleSidedSheet(trajectory.faces, trajectory.vertices.shape[1])
         scene, flag = self._build_scene(trajectory, geometry, sheet, params)
         background = background_image(params.background, (height, width))
-        context = self._context_for(width, height)
-        frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
-        for index, positions in enumerate(trajectory.vertices):
-            context.update_vertices(flag, *sheet.buffers(positions))
-            frames[index] = composite_over(context.render(scene, rgba=True), background)
-        return Clip(frames, float(trajectory.fps))
+        return render_sheet(self._context_for(width, height), scene, flag, sheet, trajectory, background)
 
     def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:
         """Validate ζ without rendering (e.g. before a long simulation).
@@ -447,48 +413,27 @@ class FlagRenderer(Renderer):
         self._materials.clear()
 
     def _context_for(self, width: int, height: int) -> OffscreenContext:
-        context = self._context
-        if context is None or (context.width, context.height) != (width, height):
-            if context is not None:
-                context.close()
-                self._materials.clear()  # their GL textures died with the context
-            context = self._context = OffscreenContext(width, height, mesh_shaders=MESH_SHADERS)
+        context = context_of_size(self._context, width, height)
+        if self._context is not None and context is not self._context:
+            self._materials.clear()  # their GL textures died with the old context
+        self._context = context
         return context
 
     def _flag_material(self, texture: str) -> Any:
         # One material (and GL texture) per design, reused across trajectories so the
         # texture is uploaded once per context rather than once per render.
-        import pyrender
-
         key = texture.lower()
         if key not in self._materials:
-            sampler = pyrender.Sampler(wrapS=pyrender.GLTF.CLAMP_TO_EDGE, wrapT=pyrender.GLTF.CLAMP_TO_EDGE)
-            image = np.array(flag_texture(key, TEXTURE_HEIGHT))
-            self._materials[key] = pyrender.MetallicRoughnessMaterial(
-                baseColorTexture=pyrender.Texture(source=image, source_channels="RGB", sampler=sampler),
-                metallicFactor=0.0,
-                roughnessFactor=0.85,
-            )
+            self._materials[key] = fabric_material(np.array(flag_texture(key, TEXTURE_HEIGHT)), roughness=0.85)
         return self._materials[key]
 
     def _build_scene(
         self, trajectory: Trajectory, geometry: FlagGeometry, sheet: DoubleSidedSheet, params: FlagRenderParams
     ) -> tuple[Any, Any]:
         """The scene for one trajectory and the flag primitive whose vertices move."""
-        use_headless_gl()
-        import pyrender
-
-        ambient = params.ambient_intensity
-        scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[ambient, ambient, ambient])
-        positions, normals = sheet.buffers(trajectory.vertices[0])
-        flag = pyrender.Primitive(
-            positions=positions,
-            normals=normals,
-            texcoord_0=np.concatenate([geometry.uv, geometry.uv]),
-            indices=sheet.indices,
-            material=self._flag_material(params.texture),
+        scene, flag = sheet_scene(
+            sheet, trajectory.vertices[0], geometry.uv, self._flag_material(params.texture), params
         )
-        scene.add(pyrender.Mesh([flag]))
         if params.pole:
             # pyrender draws solid meshes sorted by the distance of their node's origin from
             # the camera, ties in set order (object ids, so varying between runs). Where the
@@ -498,10 +443,7 @@ class FlagRenderer(Renderer):
             pose = np.eye(4)
             pose[:3, 3] = geometry.pole[1]
             scene.add(_pole_mesh(geometry), pose=pose)
-        camera, camera_pose = _camera(geometry, params)
-        scene.add(camera, pose=camera_pose)
-        light_pose = look_at(np.zeros(3), np.asarray(params.light_direction, dtype=float))
-        scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=params.light_intensity), pose=light_pose)
+        add_camera_and_sun(scene, *_camera(geometry, params), params)
         return scene, flag
 
 
@@ -523,25 +465,146 @@ def _pole_mesh(geometry: FlagGeometry) -> Any:
 
 def _camera(geometry: FlagGeometry, params: FlagRenderParams) -> tuple[Any, np.ndarray]:
     """Perspective camera and its pose ``(4, 4)`` for ζ around the flag's look-at target."""
-    import pyrender
+    distance = params.camera_distance
+    if distance is None:
+        distance = fitting_distance(params.framing * _FRAME_HALF_SIZE * geometry.length, params)
+    reach = distance + 3.0 * geometry.length + float(np.ptp(geometry.pole[:, 2]))
+    return orbit_camera(geometry.look_at_target, distance, params, znear=max(1e-3, 0.02 * distance), zfar=2.0 * reach)
 
+
+def fitting_distance(half_extent: float, params: SheetView) -> float:
+    """Camera distance in metres at which a square of half side ``half_extent`` (metres)
+    just fills the narrower side of ζ's image at ζ's field of view."""
     height, width = params.size
     yfov = math.radians(params.fov_deg)
     half_fov = math.atan(math.tan(yfov / 2) * min(1.0, width / height))
-    distance = params.camera_distance
-    if distance is None:
-        distance = params.framing * _FRAME_HALF_SIZE * geometry.length / math.tan(half_fov)
+    return half_extent / math.tan(half_fov)
+
+
+def orbit_camera(
+    target: np.ndarray, distance: float, params: SheetView, *, znear: float, zfar: float
+) -> tuple[Any, np.ndarray]:
+    """A perspective camera looking at ``target`` ``(3,)`` from ``distance`` metres away.
+
+    ζ's azimuth turns it about the vertical from the −y side (0: looking along +y,
+    positive towards +x) and its elevation raises it above the target's horizontal plane.
+
+    Returns:
+        The ``pyrender.PerspectiveCamera`` and its pose ``(4, 4)``.
+    """
+    import pyrender
+
+    height, width = params.size
     azimuth, elevation = math.radians(params.camera_azimuth_deg), math.radians(params.camera_elevation_deg)
     offset = np.array(
         [math.sin(azimuth) * math.cos(elevation), -math.cos(azimuth) * math.cos(elevation), math.sin(elevation)]
     )
-    target = geometry.look_at_target
     pose = look_at(target + distance * offset, target)
-    reach = distance + 3.0 * geometry.length + float(np.ptp(geometry.pole[:, 2]))
     camera = pyrender.PerspectiveCamera(
-        yfov=yfov, aspectRatio=width / height, znear=max(1e-3, 0.02 * distance), zfar=2.0 * reach
+        yfov=math.radians(params.fov_deg), aspectRatio=width / height, znear=znear, zfar=zfar
     )
     return camera, pose
+
+
+def fabric_material(image: np.ndarray, *, roughness: float) -> Any:
+    """A matte, non-metallic pyrender material textured with ``image`` ``(H, W, 3)`` uint8."""
+    use_headless_gl()  # may be the first pyrender import: EGL must be chosen before it
+    import pyrender
+
+    sampler = pyrender.Sampler(wrapS=pyrender.GLTF.CLAMP_TO_EDGE, wrapT=pyrender.GLTF.CLAMP_TO_EDGE)
+    return pyrender.MetallicRoughnessMaterial(
+        baseColorTexture=pyrender.Texture(source=image, source_channels="RGB", sampler=sampler),
+        metallicFactor=0.0,
+        roughnessFactor=roughness,
+    )
+
+
+def sheet_scene(
+    sheet: DoubleSidedSheet, positions: np.ndarray, uv: np.ndarray, material: Any, params: SheetView
+) -> tuple[Any, Any]:
+    """A transparent scene with ζ's ambient light and the textured sheet in it.
+
+    Args:
+        sheet: Buffers of the cloth.
+        positions: ``(V, 3)`` vertex positions of the first frame.
+        uv: ``(V, 2)`` texture coordinates.
+        material: The sheet's material (e.g. :func:`fabric_material`).
+        params: ζ.
+
+    Returns:
+        The ``pyrender.Scene`` and the sheet's primitive (whose vertices each frame updates).
+    """
+    use_headless_gl()
+    import pyrender
+
+    ambient = params.ambient_intensity
+    scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[ambient, ambient, ambient])
+    both_positions, normals = sheet.buffers(positions)
+    primitive = pyrender.Primitive(
+        positions=both_positions, normals=normals, texcoord_0=np.concatenate([uv, uv]),
+        indices=sheet.indices, material=material,
+    )
+    scene.add(pyrender.Mesh([primitive]))
+    return scene, primitive
+
+
+def add_camera_and_sun(scene: Any, camera: Any, camera_pose: np.ndarray, params: SheetView) -> None:
+    """Add the camera at ``camera_pose`` ``(4, 4)`` and ζ's directional light to ``scene``."""
+    import pyrender
+
+    scene.add(camera, pose=camera_pose)
+    light_pose = look_at(np.zeros(3), np.asarray(params.light_direction, dtype=float))
+    scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=params.light_intensity), pose=light_pose)
+
+
+def check_renderable(trajectory: Trajectory) -> None:
+    """Refuse a trajectory without frames or with non-finite positions.
+
+    Raises:
+        UserInputError: saying which.
+    """
+    if trajectory.n_frames == 0:
+        raise UserInputError("the trajectory has no frames: nothing to render")
+    if not trajectory.is_finite():
+        raise UserInputError("the trajectory has NaN or infinite vertex positions; it cannot be rendered")
+
+
+def context_of_size(context: OffscreenContext | None, width: int, height: int) -> OffscreenContext:
+    """``context`` if it renders ``width`` × ``height``, else a new one (closing ``context``)."""
+    if context is not None and (context.width, context.height) == (width, height):
+        return context
+    if context is not None:
+        context.close()
+    return OffscreenContext(width, height, mesh_shaders=MESH_SHADERS)
+
+
+def render_sheet(
+    context: OffscreenContext,
+    scene: Any,
+    primitive: Any,
+    sheet: DoubleSidedSheet,
+    trajectory: Trajectory,
+    background: np.ndarray,
+) -> Clip:
+    """Render every frame: upload the frame's sheet vertices, draw, composite over ``background``.
+
+    Args:
+        context: Offscreen context of the output size.
+        scene: Scene holding ``primitive`` (see :func:`sheet_scene`).
+        primitive: The sheet's primitive.
+        sheet: Its buffers.
+        trajectory: ``vertices`` ``(T, V, 3)``.
+        background: ``(H, W, 3)`` uint8.
+
+    Returns:
+        Clip of ``(T, H, W, 3)`` uint8 frames at ``trajectory.fps``.
+    """
+    height, width = background.shape[:2]
+    frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
+    for index, positions in enumerate(trajectory.vertices):
+        context.update_vertices(primitive, *sheet.buffers(positions))
+        frames[index] = composite_over(context.render(scene, rgba=True), background)
+    return Clip(frames, float(trajectory.fps))
 
 
 def composite_over(rgba: np.ndarray, background: np.ndarray) -> np.ndarray:
