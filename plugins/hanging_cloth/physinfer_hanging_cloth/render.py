@@ -14,8 +14,6 @@ in the image.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -24,10 +22,24 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.rendering import OffscreenContext, look_at, use_headless_gl
+from physinfer.rendering import OffscreenContext
 from physinfer.roles import Renderer
+from physinfer.settings import check_range, settings_from_mapping, settings_to_dict
 from physinfer.types import Clip, Trajectory
-from physinfer_flag.render import MESH_SHADERS, DoubleSidedSheet, composite_over
+from physinfer_flag.render import (
+    DoubleSidedSheet,
+    add_camera_and_sun,
+    check_renderable,
+    check_view,
+    context_of_size,
+    fabric_material,
+    fitting_distance,
+    frame_size,
+    orbit_camera,
+    render_sheet,
+    sheet_scene,
+    texture_coordinates,
+)
 from physinfer_hanging_cloth.fabrics import PATTERNS, fabric_texture
 
 TEXTURE_SIZE = 256
@@ -81,102 +93,28 @@ class HangingRenderParams:
         Raises:
             UserInputError: an unknown key, a value of the wrong type or out of range.
         """
-        zeta = dict(zeta or {})
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(zeta) - known)
-        if unknown:
-            raise UserInputError(
-                f"unknown hanging-cloth render parameter {unknown[0]!r}; known keys: {', '.join(sorted(known))}"
-            )
-        params = cls(**{name: _coerce(name, value) for name, value in zeta.items()})
-        params.validate()
-        return params
+        return settings_from_mapping(cls, zeta, noun="render parameter", owner="hanging-cloth")
 
     def validate(self) -> None:
         """Check every value; raises :class:`UserInputError` naming the offending key."""
-        height, width = self.size
-        if not (16 <= height <= 4096 and 16 <= width <= 4096):
-            raise UserInputError(f"image_size={self.image_size!r}: each side must be 16 to 4096 pixels")
-        _check_range("framing", self.framing, 0.2, 10.0)
-        _check_range("camera_azimuth_deg", self.camera_azimuth_deg, -75.0, 75.0)
-        _check_range("camera_elevation_deg", self.camera_elevation_deg, -45.0, 45.0)
-        if not 5.0 < self.fov_deg < 120.0:
-            raise UserInputError(f"fov_deg={self.fov_deg:g}: the field of view must lie between 5 and 120 degrees")
-        if len(self.light_direction) != 3 or not np.all(np.isfinite(self.light_direction)) or (
-            np.linalg.norm(self.light_direction) < 1e-9
-        ):
-            raise UserInputError(f"light_direction={self.light_direction!r}: give a non-zero 3-vector")
-        _check_range("light_intensity", self.light_intensity, 0.0, 100.0)
-        _check_range("ambient_intensity", self.ambient_intensity, 0.0, 1.0)
+        check_view(self)
+        check_range("camera_azimuth_deg", self.camera_azimuth_deg, -75.0, 75.0)
         if self.pattern.lower() not in PATTERNS:
             raise UserInputError(f"pattern={self.pattern!r} is unknown; choose one of: {', '.join(PATTERNS)}")
         for key in ("fabric_colour", "accent_colour", "backdrop_colour"):
             colour = getattr(self, key)
             if len(colour) != 3 or not all(0 <= c <= 255 for c in colour):
                 raise UserInputError(f"{key}={colour!r}: give three integers in [0, 255]")
-        _check_range("pattern_repeats", self.pattern_repeats, 0.5, 64.0)
+        check_range("pattern_repeats", self.pattern_repeats, 0.5, 64.0)
 
     @property
     def size(self) -> tuple[int, int]:
         """``(H, W)`` of the output frames."""
-        if isinstance(self.image_size, int):
-            return self.image_size, self.image_size
-        return int(self.image_size[0]), int(self.image_size[1])
+        return frame_size(self.image_size)
 
     def to_dict(self) -> dict[str, Any]:
         """The ζ dict (JSON-friendly: tuples become lists)."""
-        return {
-            name: list(value) if isinstance(value, tuple) else value
-            for name, value in dataclasses.asdict(self).items()
-        }
-
-
-def _check_range(key: str, value: float, low: float, high: float) -> None:
-    if not (math.isfinite(value) and low <= value <= high):
-        raise UserInputError(f"{key}={value:g} is out of range; choose a value in [{low:g}, {high:g}]")
-
-
-def _numbers(value: Any, count: int) -> list[float]:
-    parts = value.split(",") if isinstance(value, str) else list(value)
-    if len(parts) != count:
-        raise ValueError(f"expected {count} comma-separated numbers")
-    return [float(p) for p in parts]
-
-
-def _whole(value: Any) -> int:
-    number = float(value)
-    if not number.is_integer():
-        raise ValueError(f"{value!r} is not a whole number")
-    return int(number)
-
-
-def _coerce(key: str, value: Any) -> Any:
-    """Convert a ζ value (a string from the command line, JSON, or Python) to its field's type."""
-    try:
-        if key == "image_size":
-            if isinstance(value, str) and "," not in value:
-                value = float(value)
-            if isinstance(value, (int, float, np.number)):
-                return _whole(value)
-            height, width = _numbers(value, 2)
-            return _whole(height), _whole(width)
-        if key == "light_direction":
-            return tuple(_numbers(value, 3))
-        if key.endswith("_colour"):
-            return tuple(_whole(c) for c in _numbers(value, 3))
-        if key == "pattern":
-            if not isinstance(value, str):
-                raise ValueError("expected a pattern name")
-            return value
-        if key == "rod":
-            if isinstance(value, str):
-                if value.lower() not in {"true", "false", "1", "0", "yes", "no"}:
-                    raise ValueError("expected true or false")
-                return value.lower() in {"true", "1", "yes"}
-            return bool(value)
-        return float(value)
-    except (TypeError, ValueError) as exc:
-        raise UserInputError(f"render parameter {key}={value!r} has the wrong type ({exc})") from None
+        return settings_to_dict(self)
 
 
 def sample_fabric_look(rng: np.random.Generator) -> dict[str, Any]:
@@ -223,21 +161,13 @@ class HangingClothRenderer(Renderer):
             UserInputError: invalid ζ, a trajectory without frames or with NaN, bad extras.
         """
         params = HangingRenderParams.from_mapping(render_params)
-        if trajectory.n_frames == 0:
-            raise UserInputError("the trajectory has no frames: nothing to render")
-        if not trajectory.is_finite():
-            raise UserInputError("the trajectory has NaN or infinite vertex positions; it cannot be rendered")
+        check_renderable(trajectory)
         height, width = params.size
-        uv = _texture_coordinates(trajectory)
+        uv = texture_coordinates(trajectory)
         sheet = DoubleSidedSheet(trajectory.faces, trajectory.vertices.shape[1])
         scene, cloth = self._build_scene(trajectory, uv, sheet, params)
         backdrop = _backdrop(params.backdrop_colour, (height, width))
-        context = self._context_for(width, height)
-        frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
-        for index, positions in enumerate(trajectory.vertices):
-            context.update_vertices(cloth, *sheet.buffers(positions))
-            frames[index] = composite_over(context.render(scene, rgba=True), backdrop)
-        return Clip(frames, float(trajectory.fps))
+        return render_sheet(self._context_for(width, height), scene, cloth, sheet, trajectory, backdrop)
 
     def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
         """A random ζ: the fabric's look, the camera angle and the light."""
@@ -257,60 +187,25 @@ class HangingClothRenderer(Renderer):
             self._context = None
 
     def _context_for(self, width: int, height: int) -> OffscreenContext:
-        context = self._context
-        if context is None or (context.width, context.height) != (width, height):
-            if context is not None:
-                context.close()
-            context = self._context = OffscreenContext(width, height, mesh_shaders=MESH_SHADERS)
-        return context
+        self._context = context_of_size(self._context, width, height)
+        return self._context
 
     def _build_scene(
         self, trajectory: Trajectory, uv: np.ndarray, sheet: DoubleSidedSheet, params: HangingRenderParams
     ) -> tuple[Any, Any]:
         """The scene of one trajectory and the cloth primitive whose vertices move."""
-        use_headless_gl()
-        import pyrender
-
-        ambient = params.ambient_intensity
-        scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[ambient] * 3)
-        positions, normals = sheet.buffers(trajectory.vertices[0])
         image = fabric_texture(
             params.pattern, params.fabric_colour, params.accent_colour, params.pattern_repeats, TEXTURE_SIZE
         )
-        sampler = pyrender.Sampler(wrapS=pyrender.GLTF.CLAMP_TO_EDGE, wrapT=pyrender.GLTF.CLAMP_TO_EDGE)
-        material = pyrender.MetallicRoughnessMaterial(
-            baseColorTexture=pyrender.Texture(source=image, source_channels="RGB", sampler=sampler),
-            metallicFactor=0.0,
-            roughnessFactor=0.9,
-        )
-        cloth = pyrender.Primitive(
-            positions=positions, normals=normals, texcoord_0=np.concatenate([uv, uv]),
-            indices=sheet.indices, material=material,
-        )
-        scene.add(pyrender.Mesh([cloth]))
+        material = fabric_material(image, roughness=0.9)
+        scene, cloth = sheet_scene(sheet, trajectory.vertices[0], uv, material, params)
         rod = _rod_points(trajectory)
         if params.rod:
             pose = np.eye(4)
             pose[:3, 3] = rod.mean(axis=0)  # a fixed node origin keeps pyrender's draw order stable
             scene.add(_rod_mesh(rod), pose=pose)
-        camera, camera_pose = _camera(trajectory, rod, params)
-        scene.add(camera, pose=camera_pose)
-        light_pose = look_at(np.zeros(3), np.asarray(params.light_direction, dtype=float))
-        scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=params.light_intensity), pose=light_pose)
+        add_camera_and_sun(scene, *_camera(trajectory, rod, params), params)
         return scene, cloth
-
-
-def _texture_coordinates(trajectory: Trajectory) -> np.ndarray:
-    """``(V, 2)`` uv from extras, or the first frame projected on the x–z plane."""
-    n_vertices = trajectory.vertices.shape[1]
-    if "uv" in trajectory.extras:
-        uv = np.asarray(trajectory.extras["uv"], dtype=np.float32)
-        if uv.shape != (n_vertices, 2):
-            raise UserInputError(f"trajectory extras['uv'] must be ({n_vertices}, 2), got {uv.shape}")
-        return uv
-    first = trajectory.vertices[0]
-    lo, span = first.min(axis=0), np.maximum(np.ptp(first, axis=0), 1e-9)
-    return np.stack([(first[:, 0] - lo[0]) / span[0], (first[:, 2] - lo[2]) / span[2]], axis=1).astype(np.float32)
 
 
 def _rod_points(trajectory: Trajectory) -> np.ndarray:
@@ -349,7 +244,7 @@ def hanging_length(trajectory: Trajectory) -> float:
     """
     first = trajectory.vertices[0].astype(np.float64)
     if "uv" in trajectory.extras:
-        uv = _texture_coordinates(trajectory).astype(np.float64)
+        uv = texture_coordinates(trajectory).astype(np.float64)
         faces = trajectory.faces
         edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
         du, dv = np.abs(uv[edges[:, 0]] - uv[edges[:, 1]]).T
@@ -367,23 +262,12 @@ def _camera(trajectory: Trajectory, rod: np.ndarray, params: HangingRenderParams
     length and a quarter of it downwind (+y), with a half side of 0.72 hanging lengths:
     room for the rod and for a light fabric blown up at the strongest fan.
     """
-    import pyrender
-
     length = hanging_length(trajectory)
     target = rod.mean(axis=0) + np.array([0.0, 0.25 * length, -0.5 * length])
-    height, width = params.size
-    yfov = math.radians(params.fov_deg)
-    half_fov = math.atan(math.tan(yfov / 2) * min(1.0, width / height))
-    distance = params.framing * 0.72 * length / math.tan(half_fov)
-    azimuth, elevation = math.radians(params.camera_azimuth_deg), math.radians(params.camera_elevation_deg)
-    offset = np.array(
-        [math.sin(azimuth) * math.cos(elevation), -math.cos(azimuth) * math.cos(elevation), math.sin(elevation)]
+    distance = fitting_distance(params.framing * 0.72 * length, params)
+    return orbit_camera(
+        target, distance, params, znear=max(1e-3, 0.05 * distance), zfar=4.0 * distance + 4.0 * length
     )
-    pose = look_at(target + distance * offset, target)
-    camera = pyrender.PerspectiveCamera(
-        yfov=yfov, aspectRatio=width / height, znear=max(1e-3, 0.05 * distance), zfar=4.0 * distance + 4.0 * length
-    )
-    return camera, pose
 
 
 def _backdrop(colour: Colour, size: tuple[int, int]) -> np.ndarray:
