@@ -17,13 +17,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from physinfer.errors import SimulationFailed, UserInputError
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.roles import Effect, Params, Simulator
+from physinfer.settings import require
 from physinfer.types import Trajectory
 from physinfer_flag.cloth import ClothPhysics, ClothSolver, FlagRun
 from physinfer_flag.cloth_mesh import FlagMesh, build_flag_mesh
@@ -44,6 +45,127 @@ POLE_CAP = 0.05
 #: about 1.4 over the smallest step that blew up across the parameter space (docs).
 REFERENCE_DT = 1.0 / 1200.0
 REFERENCE_SPACING = 0.05
+
+
+class ClipTiming:
+    """Mixin of cloth simulator settings: step, warm-up and duration from the frame timing.
+
+    The settings dataclass provides ``n_frames``, ``fps``, ``warmup_s``, ``substeps``
+    (``int | None``) and :attr:`steps_per_frame`; the hanging cloth's settings use it too.
+    """
+
+    n_frames: int
+    fps: float
+    warmup_s: float
+    substeps: int | None
+
+    @property
+    def steps_per_frame(self) -> int:
+        """Integration steps per output frame (the settings class decides)."""
+        raise NotImplementedError
+
+    def steps_for(self, dt_max: float) -> int:
+        """``substeps``, or the fewest steps per frame that keep ``dt`` ≤ ``dt_max`` seconds."""
+        if self.substeps is not None:
+            return int(self.substeps)
+        return max(1, math.ceil(1.0 / (self.fps * dt_max) - 1e-9))
+
+    @property
+    def dt(self) -> float:
+        """Integration step in seconds."""
+        return 1.0 / (self.fps * self.steps_per_frame)
+
+    @property
+    def warmup_frames(self) -> int:
+        """Warm-up length in whole output frames."""
+        return int(round(self.warmup_s * self.fps))
+
+    @property
+    def duration(self) -> float:
+        """Simulated seconds per clip, warm-up included."""
+        return (self.warmup_frames + self.n_frames) / self.fps
+
+    def timing_checks(self) -> list[tuple[bool, str]]:
+        """``(ok, message)`` checks of ``n_frames``, ``fps``, ``warmup_s`` and ``substeps``."""
+        return [
+            (1 <= self.n_frames <= 100_000, f"n_frames must be in [1, 100000], got {self.n_frames}"),
+            (0 < self.fps <= 1000, f"fps must be in (0, 1000], got {self.fps}"),
+            (0 <= self.warmup_s <= 600, f"warmup_s must be in [0, 600] s, got {self.warmup_s}"),
+            (self.substeps is None or 1 <= self.substeps <= 100_000,
+             f"substeps must be None (automatic) or in [1, 100000], got {self.substeps}"),
+        ]
+
+    def check_step(self) -> None:
+        """Refuse a step the explicit solver cannot take.
+
+        Raises:
+            UserInputError: ``dt`` above 10 ms.
+        """
+        if self.dt > 0.01:
+            raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
+
+
+class ClothSolverSettings(Protocol):
+    """What :func:`cloth_solver` reads from a cloth simulator's settings."""
+
+    dt: float
+    steps_per_frame: int
+    gravity: float
+    rho_air: float
+    c_drag: float
+    damping: float
+    strain_limit: float
+    perturbation_m: float
+
+
+def damping_checks(damping: float, strain_limit: float) -> list[tuple[bool, str]]:
+    """``(ok, message)`` checks of the stretching damping time and the strain limit."""
+    return [
+        (0 <= damping <= 0.01, f"damping must be in [0, 0.01] s, got {damping}"),
+        (0 <= strain_limit < 1, f"strain_limit must be in [0, 1), got {strain_limit}"),
+    ]
+
+
+def cloth_solver(
+    settings: ClothSolverSettings, mesh: FlagMesh, material: ClothMaterial, *, strain_limit_sweeps: int
+) -> ClothSolver:
+    """The cloth solver of ``mesh`` and ``material`` with the physics of ``settings``."""
+    physics = ClothPhysics(
+        dt=settings.dt, gravity=settings.gravity, rho_air=settings.rho_air, c_drag=settings.c_drag,
+        damping=settings.damping, strain_limit=settings.strain_limit, strain_limit_sweeps=strain_limit_sweeps,
+    )
+    return ClothSolver(
+        mesh=mesh, material=material, physics=physics, substeps=settings.steps_per_frame,
+        perturbation=settings.perturbation_m,
+    )
+
+
+def cloth_trajectory(
+    vertices: np.ndarray, mesh: FlagMesh, fps: float, extras: dict[str, np.ndarray], offset: np.ndarray | None = None
+) -> Trajectory:
+    """A trajectory of the solver's ``vertices`` ``(T, V, 3)``, moved by ``offset`` ``(3,)``.
+
+    ``extras`` are copied, so trajectories never share arrays.
+
+    Raises:
+        SimulationFailed: ``vertices`` hold NaN or infinity.
+    """
+    if not np.isfinite(vertices).all():
+        raise SimulationFailed("cloth simulation produced NaN")
+    positions = vertices if offset is None else vertices + offset
+    return Trajectory(positions, mesh.faces.copy(), float(fps), {k: v.copy() for k, v in extras.items()})
+
+
+def check_setting_names(config_class: type, names: Any, owner: str) -> None:
+    """Refuse setting names that are not fields of the settings dataclass ``config_class``.
+
+    Raises:
+        UserInputError: ``"unknown <owner> simulator setting(s) [...]; known: [...]"``.
+    """
+    known = set(config_class.__dataclass_fields__)
+    unknown = sorted(set(names) - known)
+    if unknown:
+        raise UserInputError(f"unknown {owner} simulator setting(s) {unknown}; known: {sorted(known)}")
 
 
 def flag_parameter_space() -> ParameterSpace:
@@ -70,7 +192,7 @@ def flag_parameter_space() -> ParameterSpace:
 
 
 @dataclass(frozen=True)
-class FlagSimConfig:
+class FlagSimConfig(ClipTiming):
     """Settings of :class:`FlagSimulator` (everything but θ).
 
     Attributes:
@@ -131,16 +253,11 @@ class FlagSimConfig:
             (3 <= self.grid_u <= 1000 and 3 <= self.grid_v <= 1000,
              f"grid_u and grid_v must be in [3, 1000], got {self.grid_u} x {self.grid_v}"),
             (self.pin_mode in ("edge", "corners"), f"pin_mode must be 'edge' or 'corners', got {self.pin_mode!r}"),
-            (1 <= self.n_frames <= 100_000, f"n_frames must be in [1, 100000], got {self.n_frames}"),
-            (0 < self.fps <= 1000, f"fps must be in (0, 1000], got {self.fps}"),
-            (0 <= self.warmup_s <= 600, f"warmup_s must be in [0, 600] s, got {self.warmup_s}"),
-            (self.substeps is None or 1 <= self.substeps <= 100_000,
-             f"substeps must be None (automatic) or in [1, 100000], got {self.substeps}"),
+            *self.timing_checks(),
             (self.rho_air >= 0, f"rho_air must be >= 0 kg/m^3, got {self.rho_air}"),
             (self.c_drag >= 0, f"c_drag must be >= 0, got {self.c_drag}"),
             (self.gravity >= 0, f"gravity must be >= 0, got {self.gravity}"),
-            (0 <= self.damping <= 0.01, f"damping must be in [0, 0.01] s, got {self.damping}"),
-            (0 <= self.strain_limit < 1, f"strain_limit must be in [0, 1), got {self.strain_limit}"),
+            *damping_checks(self.damping, self.strain_limit),
             (self.strain_limit_sweeps is None or 1 <= self.strain_limit_sweeps <= 100,
              f"strain_limit_sweeps must be None or in [1, 100], got {self.strain_limit_sweeps}"),
             (math.isfinite(self.wind_direction_deg), "wind_direction_deg must be finite"),
@@ -148,11 +265,8 @@ class FlagSimConfig:
             (self.pole_height >= self.height + POLE_CAP,
              f"pole_height must be at least height + {POLE_CAP} m = {self.height + POLE_CAP} m, got {self.pole_height}"),
         ]
-        for ok, message in checks:
-            if not ok:
-                raise UserInputError(message)
-        if self.dt > 0.01:
-            raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
+        require(checks)
+        self.check_step()
 
     @property
     def spacing(self) -> float:
@@ -162,25 +276,7 @@ class FlagSimConfig:
     @property
     def steps_per_frame(self) -> int:
         """``substeps``, or the automatic choice: ``dt`` ≤ 1/1200 s × spacing / 5 cm."""
-        if self.substeps is not None:
-            return int(self.substeps)
-        dt_max = REFERENCE_DT * min(self.spacing, REFERENCE_SPACING) / REFERENCE_SPACING
-        return max(1, math.ceil(1.0 / (self.fps * dt_max) - 1e-9))
-
-    @property
-    def dt(self) -> float:
-        """Integration step in seconds."""
-        return 1.0 / (self.fps * self.steps_per_frame)
-
-    @property
-    def warmup_frames(self) -> int:
-        """Warm-up length in whole output frames."""
-        return int(round(self.warmup_s * self.fps))
-
-    @property
-    def duration(self) -> float:
-        """Simulated seconds per clip, warm-up included."""
-        return (self.warmup_frames + self.n_frames) / self.fps
+        return self.steps_for(REFERENCE_DT * min(self.spacing, REFERENCE_SPACING) / REFERENCE_SPACING)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready settings (rebuild with ``FlagSimConfig(**d)``)."""
@@ -218,14 +314,9 @@ class FlagSimulator(Simulator):
             width=c.width, height=c.height, nu=c.grid_u, nv=c.grid_v, pin_mode=c.pin_mode,
             top_z=c.pole_height - POLE_CAP,
         )
-        physics = ClothPhysics(
-            dt=c.dt, gravity=c.gravity, rho_air=c.rho_air, c_drag=c.c_drag,
-            damping=c.damping, strain_limit=c.strain_limit,
+        self.solver = cloth_solver(
+            c, self.mesh, self.material,
             strain_limit_sweeps=c.strain_limit_sweeps or (4 if c.pin_mode == "corners" else 1),
-        )
-        self.solver = ClothSolver(
-            mesh=self.mesh, material=self.material, physics=physics, substeps=c.steps_per_frame,
-            perturbation=c.perturbation_m,
         )
         self._extras = {
             "uv": self.mesh.uv.astype(np.float32),
@@ -307,10 +398,7 @@ class FlagSimulator(Simulator):
         return trajs, failures
 
     def _trajectory(self, vertices: np.ndarray) -> Trajectory:
-        if not np.isfinite(vertices).all():
-            raise SimulationFailed("cloth simulation produced NaN")
-        extras = {k: v.copy() for k, v in self._extras.items()}
-        return Trajectory(vertices, self.mesh.faces.copy(), float(self.config.fps), extras)
+        return cloth_trajectory(vertices, self.mesh, self.config.fps, self._extras)
 
 
 def make_simulator(effects: Sequence[Effect] = (), **config: Any) -> FlagSimulator:
@@ -323,9 +411,6 @@ def make_simulator(effects: Sequence[Effect] = (), **config: Any) -> FlagSimulat
     Raises:
         UserInputError: on an unknown setting name or a bad value.
     """
-    known = set(FlagSimConfig.__dataclass_fields__)
-    unknown = sorted(set(config) - known)
-    if unknown:
-        raise UserInputError(f"unknown flag simulator setting(s) {unknown}; known: {sorted(known)}")
+    check_setting_names(FlagSimConfig, config, "flag")
     return FlagSimulator(config=FlagSimConfig(**config), effects=effects)
 

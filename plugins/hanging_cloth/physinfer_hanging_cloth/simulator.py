@@ -31,10 +31,18 @@ import numpy as np
 from physinfer.errors import SimulationFailed, UserInputError
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.roles import Effect, Params, Simulator
+from physinfer.settings import require
 from physinfer.types import Trajectory
-from physinfer_flag.cloth import ClothPhysics, ClothSolver, FlagRun
+from physinfer_flag.cloth import FlagRun
 from physinfer_flag.cloth_mesh import FlagMesh, build_flag_mesh
 from physinfer_flag.material import ClothMaterial, load_material
+from physinfer_flag.simulator import (
+    ClipTiming,
+    check_setting_names,
+    cloth_solver,
+    cloth_trajectory,
+    damping_checks,
+)
 from physinfer_hanging_cloth.fan import FanSettings, fan_level_index, fan_schedule
 
 #: Bounds of θ: they cover the real fabrics' range (units.py: multipliers 1.6–22, area
@@ -65,7 +73,7 @@ def hanging_cloth_parameter_space() -> ParameterSpace:
 
 
 @dataclass(frozen=True)
-class HangingClothConfig:
+class HangingClothConfig(ClipTiming):
     """Settings of :class:`HangingClothSimulator` (everything but θ).
 
     Attributes:
@@ -122,24 +130,16 @@ class HangingClothConfig:
              f"spacing must be in [0.005, half the smaller side] m, got {self.spacing}"),
             (self.rod_height >= self.height, f"rod_height must be at least height = {self.height} m"),
             (0.3 <= self.gather <= 1.0, f"gather must be in [0.3, 1] (1: a flat top edge), got {self.gather}"),
-            (1 <= self.n_frames <= 100_000, f"n_frames must be in [1, 100000], got {self.n_frames}"),
-            (0 < self.fps <= 1000, f"fps must be in (0, 1000], got {self.fps}"),
-            (0 <= self.warmup_s <= 600, f"warmup_s must be in [0, 600] s, got {self.warmup_s}"),
-            (self.substeps is None or 1 <= self.substeps <= 100_000,
-             f"substeps must be None (automatic) or in [1, 100000], got {self.substeps}"),
+            *self.timing_checks(),
             (self.rho_air >= 0 and self.c_drag >= 0 and self.gravity >= 0,
              "rho_air, c_drag and gravity must be >= 0"),
-            (0 <= self.damping <= 0.01, f"damping must be in [0, 0.01] s, got {self.damping}"),
-            (0 <= self.strain_limit < 1, f"strain_limit must be in [0, 1), got {self.strain_limit}"),
+            *damping_checks(self.damping, self.strain_limit),
             (0 <= self.perturbation_m <= 0.1, f"perturbation_m must be in [0, 0.1] m, got {self.perturbation_m}"),
         ]
-        for ok, message in checks:
-            if not ok:
-                raise UserInputError(message)
+        require(checks)
         fan_level_index(self.fan_level)
         self.fan.validate()
-        if self.dt > 0.01:
-            raise UserInputError(f"the step 1/(fps*substeps) = {self.dt:g} s is too large; raise substeps")
+        self.check_step()
 
     @property
     def grid(self) -> tuple[int, int]:
@@ -149,32 +149,14 @@ class HangingClothConfig:
     @property
     def steps_per_frame(self) -> int:
         """``substeps``, or the automatic choice from the grid spacing and lightest fabric."""
-        if self.substeps is not None:
-            return int(self.substeps)
         nu, nv = self.grid
         actual = max(self.width / (nu - 1), self.height / (nv - 1))
         lightest = AREA_WEIGHT_BOUNDS[0]
-        dt_max = (
+        return self.steps_for(
             REFERENCE_DT
             * min(actual, REFERENCE_SPACING) / REFERENCE_SPACING
             * min(1.0, math.sqrt(lightest / REFERENCE_AREA_WEIGHT))
         )
-        return max(1, math.ceil(1.0 / (self.fps * dt_max) - 1e-9))
-
-    @property
-    def dt(self) -> float:
-        """Integration step in seconds."""
-        return 1.0 / (self.fps * self.steps_per_frame)
-
-    @property
-    def warmup_frames(self) -> int:
-        """Warm-up length in whole output frames."""
-        return int(round(self.warmup_s * self.fps))
-
-    @property
-    def duration(self) -> float:
-        """Simulated seconds per clip, warm-up included."""
-        return (self.warmup_frames + self.n_frames) / self.fps
 
 
 def hanging_mesh(config: HangingClothConfig) -> FlagMesh:
@@ -218,14 +200,7 @@ class HangingClothSimulator(Simulator):
         c = self.config
         self.material: ClothMaterial = load_material(c.material_path)
         self.mesh = hanging_mesh(c)
-        physics = ClothPhysics(
-            dt=c.dt, gravity=c.gravity, rho_air=c.rho_air, c_drag=c.c_drag,
-            damping=c.damping, strain_limit=c.strain_limit, strain_limit_sweeps=1,
-        )
-        self.solver = ClothSolver(
-            mesh=self.mesh, material=self.material, physics=physics, substeps=c.steps_per_frame,
-            perturbation=c.perturbation_m,
-        )
+        self.solver = cloth_solver(c, self.mesh, self.material, strain_limit_sweeps=1)
         self._offset = np.array([-0.5 * c.width, 0.0, 0.0], dtype=np.float32)
         nu, nv = c.grid
         self._extras = {
@@ -301,10 +276,7 @@ class HangingClothSimulator(Simulator):
         return [self._trajectory(v) for v in vertices]
 
     def _trajectory(self, vertices: np.ndarray) -> Trajectory:
-        if not np.isfinite(vertices).all():
-            raise SimulationFailed("cloth simulation produced NaN")
-        extras = {k: v.copy() for k, v in self._extras.items()}
-        return Trajectory(vertices + self._offset, self.mesh.faces.copy(), float(self.config.fps), extras)
+        return cloth_trajectory(vertices, self.mesh, self.config.fps, self._extras, self._offset)
 
 
 def make_simulator(effects: Sequence[Effect] = (), **config: Any) -> HangingClothSimulator:
@@ -313,8 +285,5 @@ def make_simulator(effects: Sequence[Effect] = (), **config: Any) -> HangingClot
     Raises:
         UserInputError: on an unknown setting name, a bad value, or any effect.
     """
-    known = set(HangingClothConfig.__dataclass_fields__)
-    unknown = sorted(set(config) - known)
-    if unknown:
-        raise UserInputError(f"unknown hanging-cloth simulator setting(s) {unknown}; known: {sorted(known)}")
+    check_setting_names(HangingClothConfig, config, "hanging-cloth")
     return HangingClothSimulator(config=HangingClothConfig(**config), effects=effects)
