@@ -5,8 +5,9 @@ dataclasses with a ``validate()`` method. Their values arrive from the command l
 strings (``--render-set image_size=120,160``), from JSON as numbers and lists, or from
 Python; :func:`settings_from_mapping` converts each value to its field's annotated type,
 refuses unknown keys, builds the dataclass and validates it, so that every mistake
-surfaces as a :class:`~physinfer.errors.UserInputError` naming the key. The helpers
-:func:`check_range` and :func:`require` serve the ``validate()`` methods themselves.
+surfaces as a :class:`~physinfer.errors.UserInputError` naming the key. The mixin
+:class:`MappingSettings` gives a dataclass ``from_mapping`` and ``to_dict`` methods built on
+it; :func:`check_range` and :func:`require` serve the ``validate()`` methods themselves.
 
 Supported field types: ``bool``, ``int`` (whole numbers, also given as ``"3"`` or
 ``3.0``), ``float``, ``str`` (a path is taken as its string), fixed-length tuples such as
@@ -24,7 +25,7 @@ import os
 import types
 import typing
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any, Protocol, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from physinfer.errors import UserInputError
 
@@ -228,3 +229,41 @@ def settings_to_dict(settings: Any) -> dict[str, Any]:
         name: list(value) if isinstance(value, tuple) else value
         for name, value in dataclasses.asdict(settings).items()
     }
+
+
+class MappingSettings:
+    """Mixin of a frozen settings dataclass: ``from_mapping`` and ``to_dict``.
+
+    The class names its keys in messages with :attr:`settings_noun` and
+    :attr:`settings_owner` (see :func:`settings_from_mapping`) and defines ``validate()``.
+
+    Example::
+
+        @dataclass(frozen=True)
+        class GlowParams(MappingSettings):
+            settings_noun: ClassVar[str] = "render parameter"
+            settings_owner: ClassVar[str] = "glow"
+            radius: float = 1.0
+
+            def validate(self) -> None:
+                check_range("radius", self.radius, 0.0, 10.0)
+    """
+
+    settings_noun: ClassVar[str] = "setting"
+    settings_owner: ClassVar[str] = ""
+
+    @classmethod
+    def from_mapping(cls: type[SettingsT], values: Mapping[str, Any] | None) -> SettingsT:
+        """Build and validate from a dict of loose values; missing keys take their defaults.
+
+        Raises:
+            UserInputError: an unknown key, a value of the wrong type or out of range; the
+                message names the key.
+        """
+        return settings_from_mapping(
+            cls, values, noun=cls.settings_noun, owner=cls.settings_owner  # type: ignore[attr-defined]
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as a JSON-friendly dict (tuples become lists)."""
+        return settings_to_dict(self)

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 
 from physinfer.errors import UserInputError
 from physinfer.settings import (
+    MappingSettings,
     check_range,
     converter_for,
     parse_bool,
@@ -110,3 +112,23 @@ def test_require_reports_the_first_failed_check() -> None:
     require([(True, "fine")])
     with pytest.raises(UserInputError, match="^second$"):
         require([(True, "first"), (False, "second"), (False, "third")])
+
+
+@dataclass(frozen=True)
+class Glow(MappingSettings):
+    settings_noun: ClassVar[str] = "render parameter"
+    settings_owner: ClassVar[str] = "glow"
+    radius: float = 1.0
+    tint: tuple[int, int, int] = (255, 255, 255)
+
+    def validate(self) -> None:
+        check_range("radius", self.radius, 0.0, 10.0)
+
+
+def test_mixin_gives_from_mapping_and_to_dict() -> None:
+    glow = Glow.from_mapping({"radius": "2", "tint": "1,2,3"})
+    assert glow == Glow(2.0, (1, 2, 3)) and glow.to_dict() == {"radius": 2.0, "tint": [1, 2, 3]}
+    with pytest.raises(UserInputError, match="unknown glow render parameter 'size'"):
+        Glow.from_mapping({"size": 3})
+    with pytest.raises(UserInputError, match="radius=11 is out of range"):
+        Glow.from_mapping({"radius": 11})

@@ -27,14 +27,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.rendering import OffscreenContext, look_at, use_headless_gl
 from physinfer.roles import Renderer
-from physinfer.settings import check_range, settings_from_mapping, settings_to_dict
+from physinfer.settings import MappingSettings, check_range
 from physinfer.types import Clip, Trajectory
 from physinfer_flag.backgrounds import BACKGROUND_NAMES, background_image, list_background_images
 from physinfer_flag.textures import FLAG_NAMES, flag_texture
@@ -58,8 +58,24 @@ reaches 0.18 lengths above the hoist top and 1.18 below, room for a flag flying 
 or drooping in a light wind."""
 
 
+class SheetViewParams(MappingSettings):
+    """Mixin of cloth render parameters ζ: ``from_mapping``/``to_dict`` and :attr:`size`.
+
+    The dataclass that uses it has the :class:`SheetView` fields and calls
+    :func:`check_view` from its ``validate()``.
+    """
+
+    settings_noun: ClassVar[str] = "render parameter"
+    image_size: int | tuple[int, int]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(H, W)`` of the output frames."""
+        return frame_size(self.image_size)
+
+
 @dataclass(frozen=True)
-class FlagRenderParams:
+class FlagRenderParams(SheetViewParams):
     """Render parameters ζ of :class:`FlagRenderer`; every field is a key of the ζ dict.
 
     Attributes:
@@ -86,6 +102,8 @@ class FlagRenderParams:
         pole: Draw the flag pole.
     """
 
+    settings_owner: ClassVar[str] = "flag"
+
     image_size: int | tuple[int, int] = 224
     camera_distance: float | None = None
     framing: float = 1.0
@@ -98,16 +116,6 @@ class FlagRenderParams:
     texture: str = "netherlands"
     background: str = "sky_cloudy"
     pole: bool = True
-
-    @classmethod
-    def from_mapping(cls, zeta: Mapping[str, Any] | None) -> FlagRenderParams:
-        """Build and validate from a ζ dict; missing keys take their defaults.
-
-        Raises:
-            UserInputError: an unknown key, a value of the wrong type, or a value out of
-                range; the message names the key.
-        """
-        return settings_from_mapping(cls, zeta, noun="render parameter", owner="flag")
 
     def validate(self) -> None:
         """Check every value; raises :class:`UserInputError` naming the offending key."""
@@ -128,14 +136,6 @@ class FlagRenderParams:
                 f"({', '.join(BACKGROUND_NAMES)}) nor an existing image file"
             )
 
-    @property
-    def size(self) -> tuple[int, int]:
-        """``(H, W)`` of the output frames."""
-        return frame_size(self.image_size)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ζ dict (JSON-friendly: tuples become lists)."""
-        return settings_to_dict(self)
 
 
 class SheetView(Protocol):

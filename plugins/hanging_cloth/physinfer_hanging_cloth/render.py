@@ -17,24 +17,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.rendering import OffscreenContext
 from physinfer.roles import Renderer
-from physinfer.settings import check_range, settings_from_mapping, settings_to_dict
+from physinfer.settings import check_range
 from physinfer.types import Clip, Trajectory
 from physinfer_flag.render import (
     DoubleSidedSheet,
+    SheetViewParams,
     add_camera_and_sun,
     check_renderable,
     check_view,
     context_of_size,
     fabric_material,
     fitting_distance,
-    frame_size,
     orbit_camera,
     render_sheet,
     sheet_scene,
@@ -49,7 +49,7 @@ Colour = tuple[int, int, int]
 
 
 @dataclass(frozen=True)
-class HangingRenderParams:
+class HangingRenderParams(SheetViewParams):
     """Render parameters ζ of :class:`HangingClothRenderer`; every field is a ζ key.
 
     Attributes:
@@ -71,6 +71,8 @@ class HangingRenderParams:
         rod: Draw the rod.
     """
 
+    settings_owner: ClassVar[str] = "hanging-cloth"
+
     image_size: int | tuple[int, int] = 224
     framing: float = 1.0
     camera_azimuth_deg: float = 30.0
@@ -86,15 +88,6 @@ class HangingRenderParams:
     backdrop_colour: Colour = (232, 232, 226)
     rod: bool = True
 
-    @classmethod
-    def from_mapping(cls, zeta: Mapping[str, Any] | None) -> HangingRenderParams:
-        """Build and validate from a ζ dict; missing keys take their defaults.
-
-        Raises:
-            UserInputError: an unknown key, a value of the wrong type or out of range.
-        """
-        return settings_from_mapping(cls, zeta, noun="render parameter", owner="hanging-cloth")
-
     def validate(self) -> None:
         """Check every value; raises :class:`UserInputError` naming the offending key."""
         check_view(self)
@@ -106,15 +99,6 @@ class HangingRenderParams:
             if len(colour) != 3 or not all(0 <= c <= 255 for c in colour):
                 raise UserInputError(f"{key}={colour!r}: give three integers in [0, 255]")
         check_range("pattern_repeats", self.pattern_repeats, 0.5, 64.0)
-
-    @property
-    def size(self) -> tuple[int, int]:
-        """``(H, W)`` of the output frames."""
-        return frame_size(self.image_size)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ζ dict (JSON-friendly: tuples become lists)."""
-        return settings_to_dict(self)
 
 
 def sample_fabric_look(rng: np.random.Generator) -> dict[str, Any]:
