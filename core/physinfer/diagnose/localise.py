@@ -13,7 +13,8 @@ of the image we then pool:
   amplitude come and go; a steady wind does not).
 
 A region's discrepancy score adds the absolute log power ratio, the relative frequency
-difference and the non-stationarity difference, so the regions that disagree most come
+difference and the non-stationarity difference (the last two only where something moves:
+at least a tenth of the busiest region's power), so the regions that disagree most come
 first. Everything is numpy; nothing depends on the embedder, so the localisation reads
 the same whatever embedding the refinement used.
 """
@@ -174,7 +175,10 @@ def compare_regions(target: SpectralMaps, fit: SpectralMaps) -> list[dict]:
     f_t, f_f = target.region_dominant(), fit.region_dominant()
     ns_t, ns_f = target.nonstationarity(), fit.nonstationarity()
     rel_freq = np.abs(f_t - f_f) / np.maximum(np.maximum(f_t, f_f), 1e-6)
-    score = np.abs(ratio) + rel_freq + np.abs(ns_t - ns_f)
+    # Frequency and non-stationarity of a region where (almost) nothing moves are those of
+    # pixel noise: only the power term speaks for such regions.
+    moving = np.maximum(target.region_power(), fit.region_power()) >= 100.0 * floor
+    score = np.abs(ratio) + np.where(moving, rel_freq + np.abs(ns_t - ns_f), 0.0)
     regions = []
     for r in range(g):
         for c in range(g):
