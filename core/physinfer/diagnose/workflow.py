@@ -135,6 +135,7 @@ def run_stage(
     steps: int,
     start: Mapping[str, float] | None,
     target_label: str,
+    seed: int | None = None,
 ) -> RefineResult:
     """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
 
@@ -147,7 +148,9 @@ def run_stage(
         steps: Trials in all.
         start: Physical warm-start values (``None``: the centre).
         target_label: Stored in ``run.json``.
+        seed: Optimizer and simulation seed (``None``: the diagnosis seed).
     """
+    seed = settings.seed if seed is None else seed
     space = pipeline.simulator.parameter_space
     factory = registry.get("optimizers", settings.optimizer).load()
     if start is not None:
@@ -156,7 +159,7 @@ def run_stage(
     run_info = {
         "plugin": settings.plugin,
         "optimizer": settings.optimizer,
-        "seed": settings.seed,
+        "seed": seed,
         "steps": steps,
         "effects": [e.name for e in pipeline.effects],
         "embedder": settings.embedder or pipeline.phenomenon.default_embedder,
@@ -167,7 +170,7 @@ def run_stage(
         "start": None if start is None else {k: float(v) for k, v in start.items()},
         "stage": name,
     }
-    config = RefineConfig(steps=steps, optimizer=settings.optimizer, seed=settings.seed)
+    config = RefineConfig(steps=steps, optimizer=settings.optimizer, seed=seed)
     resume = run_dir.run_file.is_file()
     return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
 
@@ -255,8 +258,11 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         cal_seed = noise_seeds(settings.seed + 7, 1)[0]
         encode_dir = settings.out / "calibration" if settings.target_path is not None else None
         cal_target = _calibration_target(base, baseline.best_params, target, cal_seed, encode_dir)
+        # Another optimizer seed: with the baseline's own seed the optimizer would propose the
+        # baseline's first trials again, and one of them made this target (too easy a test).
         cal = run_stage(
-            "calibration", base, cal_target, steps=steps, start=None, target_label="self-consistency", **common
+            "calibration", base, cal_target, steps=steps, start=None, target_label="self-consistency",
+            seed=settings.seed + 1, **common,
         )
         cal_gap = measure_gap(
             base,
