@@ -274,7 +274,24 @@ def run_refinement(
     Returns:
         The :class:`RefineResult` (also written by :func:`physinfer.report.write_report`).
     """
+    from physinfer.threads import refinement_torch_threads, torch_threads
+
     config.validate()
+    with torch_threads(refinement_torch_threads()):
+        return _run_refinement(pipeline, target, optimizer_factory, run_dir, config, run_info, resume, on_trial)
+
+
+def _run_refinement(
+    pipeline: Pipeline,
+    target: Target,
+    optimizer_factory: Callable[..., Optimizer],
+    run_dir: RunDirectory,
+    config: RefineConfig,
+    run_info: dict[str, Any],
+    resume: bool,
+    on_trial: Callable[[TrialRecord, float], None] | None,
+) -> RefineResult:
+    """The body of :func:`run_refinement` (torch threads already limited)."""
     start = time.perf_counter()
     space = pipeline.simulator.parameter_space
     # Embed first: a target the embedder refuses (too short, unreadable) leaves no run behind.
