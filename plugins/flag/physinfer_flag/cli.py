@@ -34,6 +34,10 @@ DeviceOpt = Annotated[
     str | None, typer.Option("--device", help="torch device (default: cuda if present, else cpu).")
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")]
+ThreadsOpt = Annotated[
+    int | None,
+    typer.Option("--threads", help="torch CPU threads (default: $PHYSINFER_TORCH_THREADS, else 1)."),
+]
 ModelOpt = Annotated[
     Path | None,
     typer.Option(
@@ -127,6 +131,19 @@ def baseline_frontend(frames: int | None) -> Any:
     return config if frames is None else dataclasses.replace(config, n_frames=frames)
 
 
+def cpu_threads(threads: int | None) -> Any:
+    """A context limiting torch to ``threads`` CPU threads (default: the refinement's rule).
+
+    On a shared machine torch's spinning OpenMP threads wait on descheduled peers: on the
+    2-core reference machine under load the front end ran 4–8× faster on 1 thread than on 2
+    (see :mod:`physinfer.threads`).
+    """
+    from physinfer.threads import refinement_torch_threads, torch_threads
+
+    check_positive("--threads", threads)
+    return torch_threads(threads or refinement_torch_threads())
+
+
 def check_positive(name: str, value: int | None) -> None:
     """Refuse a non-positive count option."""
     if value is not None and value < 1:
@@ -159,6 +176,7 @@ def train_cmd(
     batch_size: Annotated[int | None, typer.Option("--batch-size", help="Clips per batch (default 32).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of initialisation and batch order.")] = 0,
     device: DeviceOpt = None,
+    threads: ThreadsOpt = None,
     resume: Annotated[
         bool, typer.Option("--resume/--no-resume", help="Continue the run found in --out (default).")
     ] = True,
@@ -194,17 +212,18 @@ def train_cmd(
             train_config, batch_size=batch_size, clips_per_label=min(4, batch_size)
         )
     started = time.perf_counter()
-    summary = train_from_directory(
-        data,
-        out,
-        epochs=epochs,
-        positives=rule,  # type: ignore[arg-type]
-        model_config=SDNConfig(frontend=frontend),
-        train_config=train_config,
-        resume=resume,
-        device=device,
-        progress=progress,
-    )
+    with cpu_threads(threads):
+        summary = train_from_directory(
+            data,
+            out,
+            epochs=epochs,
+            positives=rule,  # type: ignore[arg-type]
+            model_config=SDNConfig(frontend=frontend),
+            train_config=train_config,
+            resume=resume,
+            device=device,
+            progress=progress,
+        )
     summary.update(data=str(data), positives=rule, seconds=round(time.perf_counter() - started, 2))
     if as_json:
         emit_json(summary)
@@ -240,6 +259,7 @@ def evaluate_triplets_cmd(
     frames: FramesOpt = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the triplet draw.")] = 0,
     device: DeviceOpt = None,
+    threads: ThreadsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Triplet accuracy of an embedding on a dataset split (the test split by default)."""
@@ -257,17 +277,18 @@ def evaluate_triplets_cmd(
     from physinfer_flag.sdn.workflows import evaluate_triplets_in_directory
 
     started = time.perf_counter()
-    scores = evaluate_triplets_in_directory(
-        data,
-        name,
-        split=split,
-        n_triplets=n_triplets,
-        positives=rule,  # type: ignore[arg-type]
-        seed=seed,
-        spectral_frontend=baseline_frontend(frames),
-        device=device,
-        progress=not as_json,
-    )
+    with cpu_threads(threads):
+        scores = evaluate_triplets_in_directory(
+            data,
+            name,
+            split=split,
+            n_triplets=n_triplets,
+            positives=rule,  # type: ignore[arg-type]
+            seed=seed,
+            spectral_frontend=baseline_frontend(frames),
+            device=device,
+            progress=not as_json,
+        )
     scores.update(embedder=embedder, data=str(data), seconds=round(time.perf_counter() - started, 2))
     if as_json:
         emit_json(scores)
@@ -299,6 +320,7 @@ def evaluate_wind_cmd(
     frames: FramesOpt = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the head's initialisation and batches.")] = 0,
     device: DeviceOpt = None,
+    threads: ThreadsOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Wind-speed regression: a head fitted on the train split, MSE and Acc@0.5 on test."""
@@ -314,14 +336,15 @@ def evaluate_wind_cmd(
     from physinfer_flag.sdn.workflows import evaluate_wind_in_directory
 
     started = time.perf_counter()
-    scores = evaluate_wind_in_directory(
-        data,
-        name,
-        config=RegressionConfig(target=target, epochs=head_epochs, seed=seed, progress=not as_json),
-        n_frames=frames,
-        spectral_frontend=baseline_frontend(frames if embedder == "spectral" else None),
-        device=device,
-    )
+    with cpu_threads(threads):
+        scores = evaluate_wind_in_directory(
+            data,
+            name,
+            config=RegressionConfig(target=target, epochs=head_epochs, seed=seed, progress=not as_json),
+            n_frames=frames,
+            spectral_frontend=baseline_frontend(frames if embedder == "spectral" else None),
+            device=device,
+        )
     scores.update(
         embedder=embedder, target=target, data=str(data), seconds=round(time.perf_counter() - started, 2)
     )

@@ -170,6 +170,7 @@ def test_evaluate_wind_of_trained_model_and_baseline(app, data, model):
         (["train", "--data", "{tmp}", "--out", "{tmp}/m"], "not a dataset"),
         (["train", "--data", "{data}", "--out", "{tmp}/m", "--positives", "seeds"], "'simulation' or 'parameters'"),
         (["train", "--data", "{data}", "--out", "{tmp}/m", "--epochs", "0"], "positive integer"),
+        (["train", "--data", "{data}", "--out", "{tmp}/m", "--threads", "0"], "--threads must be a positive"),
         (["evaluate", "triplets", "--data", "{data}", "--model", "{tmp}/none.safetensors"], "no such file"),
         (["evaluate", "triplets", "--data", "{data}", "--embedder", "resnet18"], "choose one of sdn, spectral"),
         (["evaluate", "wind", "--data", "{data}", "--embedder", "spectral", "--model", "{tmp}"], "no weights file"),
