@@ -1,9 +1,9 @@
 """The flag phenomenon record and its embedded default target.
 
 The default target is simulated and rendered deterministically from a ground truth away
-from the centre of the space. Until the shipped SDN weights exist (``make pretrained``,
-issue 5), the flag refines with the parameter-free ``spectral`` embedder (the SDN front end
-and pooling).
+from the centre of the space. The flag refines with the SDN and the weights shipped in
+``physinfer_flag/data/sdn_default.safetensors`` (``make pretrained`` reproduces them);
+``--embedder spectral`` is the parameter-free fallback.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def make_phenomenon() -> Phenomenon:
         parameter_space=flag_parameter_space(),
         make_simulator=make_simulator,
         make_renderer=make_renderer,
-        default_embedder="spectral",
+        default_embedder="sdn",
         default_target=default_target,
         default_steps=40,
     )
