@@ -12,7 +12,7 @@ and ``confusion`` (hidden → named → count).
 Example (the numbers in docs/benchmarks.md)::
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_diagnose.py --plugin pendulum \\
-        --seeds 5 --steps 16 --optimizer cma --render-size 48 --out /tmp/bench_diagnose
+        --seeds 5 --steps 16 --optimizer ax --render-size 48 --out /tmp/bench_diagnose
 """
 
 from __future__ import annotations
@@ -205,7 +205,7 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=16)
     parser.add_argument("--effect-steps", type=int, default=None)
-    parser.add_argument("--optimizer", default="cma")
+    parser.add_argument("--optimizer", default="ax")
     parser.add_argument("--embedder", default=None)
     parser.add_argument("--render-size", type=int, default=None)
     parser.add_argument("--floor-samples", type=int, default=4)
