@@ -89,6 +89,12 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     }
 
 
+def _same_run(a: dict, b: dict) -> bool:
+    """Settings equal apart from the number of targets and the optimizer list."""
+    ignore = {"targets", "optimizers"}
+    return {k: v for k, v in a.items() if k not in ignore} == {k: v for k, v in b.items() if k not in ignore}
+
+
 def accuracy(rows: list[dict]) -> dict[str, Any]:
     """Median errors and the share of wind errors within 0.5 m/s."""
     wind = [r["abs_errors"]["wind_speed"] for r in rows if "wind_speed" in r["abs_errors"]]
@@ -128,9 +134,11 @@ def main() -> None:
     settings = {k: v for k, v in vars(args).items() if k != "out"}
     done: dict[tuple[int, str], dict] = {}
     if log.exists():
+        # A row is reusable when it was run the same way; how many targets and which
+        # optimizers a run asked for do not change a row, so a run can be extended.
         for line in log.read_text().splitlines():
             row = json.loads(line)
-            if row.get("settings") == settings:
+            if _same_run(row.get("settings", {}), settings):
                 done[(row["target"], row["optimizer"])] = row
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(args.targets):
@@ -148,8 +156,9 @@ def main() -> None:
                   f"wall {row['wall_time_s']:.1f} s", file=__import__("sys").stderr, flush=True)
     pipeline.renderer.close()
 
-    by_optimizer = {o: accuracy([r for r in done.values() if r["optimizer"] == o]) for o in optimizers}
-    first = [r for r in done.values() if r["optimizer"] == optimizers[0]]
+    wanted = [r for r in done.values() if r["target"] < args.targets]
+    by_optimizer = {o: accuracy([r for r in wanted if r["optimizer"] == o]) for o in optimizers}
+    first = [r for r in wanted if r["optimizer"] == optimizers[0]]
     phases = {k: statistics.median(r[k] for r in first) for k in ("wall_time_s", "bo_s", "simulate_s", "render_s", "embed_s")}
     report = {
         "benchmark": "refine",
