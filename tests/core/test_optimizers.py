@@ -32,3 +32,31 @@ def test_random_is_reproducible_per_index():
     b.attach(np.zeros(3))  # a resumed run attaches first, then continues at the same index
     a.attach(np.zeros(3))
     np.testing.assert_array_equal(a.ask(1)[0].x, b.ask(1)[0].x)
+
+
+def test_ax_falls_back_to_a_seeded_random_point_when_the_gp_cannot_be_fitted(monkeypatch):
+    """Fault injection: BoTorch's ModelFittingError on one step must not end the run."""
+    from botorch.exceptions.errors import ModelFittingError
+
+    from physinfer.optimizers.ax import AxOptimizer
+
+    def fail(**_):
+        raise ModelFittingError("All attempts to fit the model have failed.")
+
+    points = []
+    for _ in range(2):
+        opt = AxOptimizer(dim=3, seed=4)
+        monkeypatch.setattr(opt._client, "get_next_trials", fail)
+        trial = opt.ask(1)[0]
+        assert opt.fallbacks == 1 and np.all(np.abs(trial.x) <= 1.0)
+        opt.tell(trial.index, 1.0)
+        points.append(trial.x)
+    assert np.array_equal(points[0], points[1]), "the fallback draw is seeded"
+
+    def other(**_):
+        raise RuntimeError("a real bug")
+
+    opt = AxOptimizer(dim=3, seed=4)
+    monkeypatch.setattr(opt._client, "get_next_trials", other)
+    with pytest.raises(RuntimeError, match="a real bug"):
+        opt.ask(1)

@@ -27,6 +27,11 @@ def _quiet_ax() -> None:
     warnings.filterwarnings("ignore", module="(ax|botorch|gpytorch|linear_operator).*")
 
 
+#: Exceptions of a failed GP fit (BoTorch, GPyTorch, linear_operator), matched by name so
+#: that importing this module does not import them.
+_FIT_FAILURES = frozenset({"ModelFittingError", "NotPSDError", "NanError"})
+
+
 class AxOptimizer(Optimizer):
     """Ask/tell over ``[-1, 1]^D`` with an Ax ``Client``.
 
@@ -62,6 +67,7 @@ class AxOptimizer(Optimizer):
         )
         self._client.configure_optimization(objective=f"-{METRIC}")
         self._client.set_generation_strategy(self._strategy(n_init, kernel))
+        self.fallbacks = 0
 
     def _strategy(self, n_init: int, kernel: str):  # noqa: ANN202 - Ax type
         from ax.api.utils.generation_strategy_dispatch import choose_generation_strategy
@@ -94,11 +100,29 @@ class AxOptimizer(Optimizer):
         return {n: float(np.clip(v, -1.0, 1.0)) for n, v in zip(self.names, x, strict=True)}
 
     def ask(self, n: int = 1) -> list[Trial]:
-        proposals = self._client.get_next_trials(max_trials=n)
+        """Ax's next ``n`` trials; a random point where the GP cannot be fitted.
+
+        BoTorch gives up fitting the GP now and then (seen on a chaotic flag target after
+        30 trials with a measured observation noise); one unfit step should not end a
+        run of many minutes, so that step falls back to a uniform draw, seeded by
+        (seed, trial count) so a resumed run draws the same, and ``fallbacks`` counts it.
+        """
+        try:
+            proposals = self._client.get_next_trials(max_trials=n)
+        except Exception as exc:
+            if type(exc).__name__ not in _FIT_FAILURES:
+                raise
+            return [self._fallback_trial() for _ in range(n)]
         _quiet_ax()  # modules imported lazily during the first GP fit log again
         return [
             Trial(idx, np.array([float(p[name]) for name in self.names])) for idx, p in sorted(proposals.items())
         ]
+
+    def _fallback_trial(self) -> Trial:
+        self.fallbacks += 1
+        n_trials = len(self._client._experiment.trials)
+        rng = np.random.default_rng([self.seed, n_trials, 0xFA11])
+        return self.attach(rng.uniform(-1.0, 1.0, self.dim))
 
     def attach(self, x: np.ndarray) -> Trial:
         idx = self._client.attach_trial(parameters=self._params(np.asarray(x, dtype=float)))
