@@ -207,6 +207,22 @@ class Target:
     render_params: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
 
+    @classmethod
+    def synthetic(
+        cls, simulator: Simulator, renderer: Renderer, truth: Params, *, seed: int, description: str
+    ) -> Target:
+        """A target simulated from ``truth`` under ``seed`` and rendered at the default ζ.
+
+        The embedded default target of a phenomenon is usually one of these; the renderer
+        is closed afterwards (its EGL context is not needed again).
+        """
+        zeta = dict(renderer.default_render_params)
+        try:
+            clip = renderer.render(simulator.simulate(truth, seed=seed), zeta)
+        finally:
+            renderer.close()
+        return cls(clip=clip, truth=dict(truth), render_params=zeta, description=description)
+
 
 @dataclass(frozen=True)
 class Phenomenon:

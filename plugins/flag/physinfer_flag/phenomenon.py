@@ -43,12 +43,9 @@ def make_renderer():  # noqa: ANN201 - FlagRenderer
 @cache
 def default_target() -> Target:
     """A clip of the flag at :func:`_default_truth`, seed 12345, default ζ."""
-    truth = _default_truth()
-    renderer = make_renderer()
-    clip = renderer.render(make_simulator().simulate(truth, seed=12345))
-    zeta = dict(renderer.default_render_params)
-    renderer.close()
-    return Target(clip=clip, truth=truth, render_params=zeta, description="synthetic flag (seed 12345)")
+    return Target.synthetic(
+        make_simulator(), make_renderer(), _default_truth(), seed=12345, description="synthetic flag (seed 12345)"
+    )
 
 
 def make_phenomenon() -> Phenomenon:

@@ -36,12 +36,8 @@ def make_renderer():  # noqa: ANN201 - HangingClothRenderer
 @cache
 def default_target() -> Target:
     """A clip of the fabric :data:`DEFAULT_TRUTH` at fan W2, seed 0, default ζ."""
-    renderer = make_renderer()
-    clip = renderer.render(make_simulator().simulate(DEFAULT_TRUTH, seed=DEFAULT_SEED))
-    zeta = dict(renderer.default_render_params)
-    renderer.close()
-    return Target(
-        clip=clip, truth=dict(DEFAULT_TRUTH), render_params=zeta,
+    return Target.synthetic(
+        make_simulator(), make_renderer(), DEFAULT_TRUTH, seed=DEFAULT_SEED,
         description=f"synthetic hanging cloth (fan W2, seed {DEFAULT_SEED})",
     )
 
