@@ -28,6 +28,7 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -153,7 +154,7 @@ def main() -> None:
                 fh.write(json.dumps(row) + "\n")
             done[(index, optimizer)] = row
             print(f"target {index} {optimizer}: wind err {row['abs_errors'].get('wind_speed', float('nan')):.3f} "
-                  f"wall {row['wall_time_s']:.1f} s", file=__import__("sys").stderr, flush=True)
+                  f"wall {row['wall_time_s']:.1f} s", file=sys.stderr, flush=True)
     pipeline.renderer.close()
 
     wanted = [r for r in done.values() if r["target"] < args.targets]

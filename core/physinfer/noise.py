@@ -129,7 +129,7 @@ def measure_noise_floor(
         ValueError: for fewer than two seeds or a ζ list of the wrong length.
         SimulationFailed: when fewer than two re-simulations succeed.
     """
-    from physinfer.refine import squared_distance
+    from physinfer.refine import simulate_and_embed, squared_distance
 
     if len(seeds) < 2:
         raise ValueError(f"a noise floor needs at least two seeds, got {len(seeds)}")
@@ -138,14 +138,11 @@ def measure_noise_floor(
         raise ValueError(f"{len(zetas)} render-parameter sets for {len(seeds)} seeds")
     embeddings, used, failed = [], [], 0
     for seed, zeta in zip(seeds, zetas, strict=True):
-        try:
-            trajectory = pipeline.simulator.simulate(params, seed=int(seed))
-            if not trajectory.is_finite():
-                raise SimulationFailed("non-finite positions")
-        except Exception:  # a failed re-simulation is a property of θ and this seed
+        embedding, _, _ = simulate_and_embed(pipeline, params, zeta, int(seed))
+        if embedding is None:  # a failed re-simulation is a property of θ and this seed
             failed += 1
             continue
-        embeddings.append(np.asarray(pipeline.embedder.embed(pipeline.renderer.render(trajectory, zeta))))
+        embeddings.append(embedding)
         used.append(int(seed))
     if len(embeddings) < 2:
         raise SimulationFailed(f"only {len(embeddings)} of {len(seeds)} re-simulations succeeded")

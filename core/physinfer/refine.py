@@ -141,14 +141,13 @@ def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sum((np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)) ** 2))
 
 
-def evaluate(
+def simulate_and_embed(
     pipeline: Pipeline,
     params: Mapping[str, float],
-    target_embedding: np.ndarray,
     render_params: Mapping[str, Any],
     seed: int,
-) -> tuple[float | None, str | None, dict[str, float]]:
-    """Simulate, render and embed one θ; returns ``(distance, error, timings)``.
+) -> tuple[np.ndarray | None, str | None, dict[str, float]]:
+    """Simulate, render and embed one θ; returns ``(embedding, error, timings)``.
 
     A failing simulation gives ``(None, reason, timings)``; render and embed errors
     propagate (they are not properties of θ).
@@ -165,9 +164,22 @@ def evaluate(
     t1 = time.perf_counter()
     clip = pipeline.renderer.render(trajectory, render_params)
     t2 = time.perf_counter()
-    embedding = pipeline.embedder.embed(clip)
-    t3 = time.perf_counter()
-    timings.update(simulate=t1 - t0, render=t2 - t1, embed=t3 - t2)
+    embedding = np.asarray(pipeline.embedder.embed(clip))
+    timings.update(simulate=t1 - t0, render=t2 - t1, embed=time.perf_counter() - t2)
+    return embedding, None, timings
+
+
+def evaluate(
+    pipeline: Pipeline,
+    params: Mapping[str, float],
+    target_embedding: np.ndarray,
+    render_params: Mapping[str, Any],
+    seed: int,
+) -> tuple[float | None, str | None, dict[str, float]]:
+    """:func:`simulate_and_embed` and the distance to the target: ``(distance, error, timings)``."""
+    embedding, error, timings = simulate_and_embed(pipeline, params, render_params, seed)
+    if embedding is None:
+        return None, error, timings
     distance = squared_distance(embedding, target_embedding)
     if not np.isfinite(distance):
         return None, "the embedding distance is not finite", timings
