@@ -32,6 +32,8 @@ def noise_seeds(base_seed: int, n: int) -> list[int]:
     Re-simulation seeds must differ from the seed every trial of a refinement uses, or the
     "re-simulation" would repeat the trial's own clip.
     """
+    if n <= 0:
+        return []
     state = np.random.SeedSequence([int(base_seed), 0x5EED]).generate_state(4 * n + 4, dtype=np.uint32)
     seeds: list[int] = []
     for value in (int(v) % (2**31 - 1) for v in state):

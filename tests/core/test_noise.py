@@ -91,9 +91,27 @@ def test_refinement_measures_the_observation_noise_and_reports_the_floor(tmp_pat
     assert floor["n"] == 4 and floor["floor"] > 0 and floor["gap"] > 0
 
 
-def test_seeds_per_trial_averages_and_costs_simulations(tmp_path):
-    result = run(tmp_path, RefineConfig(steps=3, optimizer="random", seeds_per_trial=3))
+def test_noise_seeds_of_none_is_empty():
+    # n = 0 once returned four seeds, so every trial of a refinement was simulated five times.
+    assert noise_seeds(0, 0) == [] and noise_seeds(3, -1) == []
+    assert RefineConfig(seed=5).trial_seeds() == [5]
+
+
+@pytest.mark.parametrize("seeds_per_trial", [1, 3])
+def test_seeds_per_trial_costs_that_many_simulations_per_trial(tmp_path, monkeypatch, seeds_per_trial):
+    seeds_seen = []
+    original = NoisySimulator.simulate
+
+    def counting(self, params, *, seed=0):
+        if self.sigma > 0:  # not the noiseless simulator that makes the target
+            seeds_seen.append(seed)
+        return original(self, params, seed=seed)
+
+    monkeypatch.setattr(NoisySimulator, "simulate", counting)
+    result = run(tmp_path, RefineConfig(steps=3, optimizer="random", seeds_per_trial=seeds_per_trial))
     assert "noise_floor" not in result.extra and result.extra["observation_sem"] is None
+    assert len(seeds_seen) == 3 * seeds_per_trial
+    assert seeds_seen[:seeds_per_trial] == RefineConfig(seeds_per_trial=seeds_per_trial).trial_seeds()
     assert RefineConfig(seeds_per_trial=3, seed=5).trial_seeds()[0] == 5
 
 
