@@ -19,6 +19,10 @@ Usage::
 
     PYOPENGL_PLATFORM=egl python benchmarks/bench_refine.py --plugin flag --steps 40 --targets 20 \
         --optimizers ax,random,cma --out runs/bench_refine
+
+On a machine with more cores, run ``--shard 0/2`` and ``--shard 1/2`` (same ``--out``) as two
+processes; each prints the summary of every row logged so far. Wall times then include the
+other shard's load.
 """
 
 from __future__ import annotations
@@ -92,8 +96,34 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
 
 def _same_run(a: dict, b: dict) -> bool:
     """Settings equal apart from the number of targets and the optimizer list."""
-    ignore = {"targets", "optimizers"}
+    ignore = {"targets", "optimizers", "shard"}
     return {k: v for k, v in a.items() if k not in ignore} == {k: v for k, v in b.items() if k not in ignore}
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"K/N"`` → ``(K, N)`` with ``0 <= K < N``."""
+    try:
+        k, n = (int(part) for part in text.split("/"))
+    except ValueError:
+        k, n = -1, 0
+    if not 0 <= k < n:
+        raise SystemExit(f"--shard {text!r}: give K/N with 0 <= K < N, for example 0/2 and 1/2 for two processes")
+    return k, n
+
+
+def logged_rows(log: Path, settings: dict) -> dict[tuple[int, str], dict]:
+    """Rows of ``results.jsonl`` run with these settings, by (target, optimizer).
+
+    How many targets and which optimizers a run asked for do not change a row, so a run
+    can be extended; rows run with other settings are ignored.
+    """
+    done: dict[tuple[int, str], dict] = {}
+    if log.exists():
+        for line in log.read_text().splitlines():
+            row = json.loads(line)
+            if _same_run(row.get("settings", {}), settings):
+                done[(row["target"], row["optimizer"])] = row
+    return done
 
 
 def accuracy(rows: list[dict]) -> dict[str, Any]:
@@ -123,7 +153,10 @@ def main() -> None:
     parser.add_argument("--seeds-per-trial", type=int, default=1)
     parser.add_argument("--floor-samples", type=int, default=4)
     parser.add_argument("--out", default="runs/bench_refine")
+    parser.add_argument("--shard", default="0/1", help="K/N: run only targets with index %% N == K, so N "
+                        "processes (or machines sharing --out) split the work; the summary covers every row logged")
     args = parser.parse_args()
+    shard, n_shards = parse_shard(args.shard)
 
     registry, _ = load_registry()
     pipeline = build_pipeline(registry, args.plugin, embedder=args.embedder,
@@ -132,17 +165,10 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "results.jsonl"
-    settings = {k: v for k, v in vars(args).items() if k != "out"}
-    done: dict[tuple[int, str], dict] = {}
-    if log.exists():
-        # A row is reusable when it was run the same way; how many targets and which
-        # optimizers a run asked for do not change a row, so a run can be extended.
-        for line in log.read_text().splitlines():
-            row = json.loads(line)
-            if _same_run(row.get("settings", {}), settings):
-                done[(row["target"], row["optimizer"])] = row
+    settings = {k: v for k, v in vars(args).items() if k not in ("out", "shard")}
+    done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
-    for index in range(args.targets):
+    for index in range(shard, args.targets, n_shards):
         target = None
         for optimizer in optimizers:
             if (index, optimizer) in done:
@@ -150,13 +176,14 @@ def main() -> None:
             target = target or make_target(pipeline, index)
             row = refine_one(pipeline, registry, target, optimizer, args, out / f"t{index:02d}-{optimizer}")
             row.update(target=index, settings=settings, truth={k: target.truth[k] for k in ("wind_speed", "area_weight") if k in target.truth})
-            with log.open("a") as fh:
+            with log.open("a") as fh:  # one write of one line: shards appending at once do not interleave
                 fh.write(json.dumps(row) + "\n")
             done[(index, optimizer)] = row
             print(f"target {index} {optimizer}: wind err {row['abs_errors'].get('wind_speed', float('nan')):.3f} "
                   f"wall {row['wall_time_s']:.1f} s", file=sys.stderr, flush=True)
     pipeline.renderer.close()
 
+    done = logged_rows(log, settings)  # other shards' rows too
     wanted = [r for r in done.values() if r["target"] < args.targets]
     by_optimizer = {o: accuracy([r for r in wanted if r["optimizer"] == o]) for o in optimizers}
     first = [r for r in wanted if r["optimizer"] == optimizers[0]]
