@@ -404,3 +404,97 @@ def test_cli_generate_prints_one_json_object(wave_registry, tmp_path):
     assert "installed: wave" in json.loads(bad.stdout)["error"]
     bad_preset = runner.invoke(dataset_app, ["generate", "-p", "wave", "--out", str(tmp_path / "y"), "--preset", "big"])
     assert bad_preset.exit_code == 2 and "choose one of cpu, paper" in bad_preset.output
+
+
+# -------------------------------------------------------------- seeds per θ (issue 5)
+
+
+def _sims(units) -> list:
+    return [s for u in units for s in u.sims]
+
+
+def test_one_seed_per_theta_keeps_the_plan_and_the_stored_identity():
+    from physinfer.datasets.engine import dataset_config
+    from physinfer.datasets.plan import SIM_STREAM, THETA_STREAM, seed_sequence
+
+    gen = PhenomenonDatasetGenerator(phenomenon=make_wave())
+    assert TINY.seeds_per_theta == 1
+    for sim in _sims(plan_dataset(gen, TINY, seed=7)):
+        # The rule as it was before the option existed: θ and seed from the simulation's own key.
+        theta_rng = np.random.default_rng(seed_sequence(7, sim.split, sim.local, THETA_STREAM))
+        assert sim.params == gen.sample_params(theta_rng)
+        assert sim.seed == int(seed_sequence(7, sim.split, sim.local, SIM_STREAM).generate_state(1)[0] & 0x7FFFFFFF)
+    same = TINY.with_overrides(seeds_per_theta=1)
+    assert same == TINY and same.name == "tiny"
+    # Datasets made before the option existed store no such key, and must still resume.
+    assert "seeds_per_theta" not in TINY.to_dict()
+    assert "seeds_per_theta" not in json.dumps(dataset_config(gen, TINY, 7))
+
+
+def test_consecutive_simulations_share_theta_and_keep_their_own_seed():
+    gen = PhenomenonDatasetGenerator(phenomenon=make_wave())
+    one = {(s.split, s.local): s for s in _sims(plan_dataset(gen, TINY, seed=7))}
+    for n in (2, 3):
+        preset = TINY.with_overrides(seeds_per_theta=n)
+        assert preset.name == "tiny+custom" and preset.to_dict()["seeds_per_theta"] == n
+        assert DatasetPreset.from_dict(preset.to_dict()) == preset
+        shared = _sims(plan_dataset(gen, preset, seed=7))
+        assert [s.sim for s in shared] == list(range(TINY.sims.total))
+        for s in shared:
+            assert s.params == one[(s.split, s.local // n)].params  # θ of the group's key
+            assert s.seed == one[(s.split, s.local)].seed  # the simulation's own seed
+        for split in SPLITS:
+            in_split = [s for s in shared if s.split == split]
+            groups: dict[int, list] = {}
+            for s in in_split:
+                groups.setdefault(s.local // n, []).append(s)
+            # The last group of a split is short when n does not divide its count.
+            assert [len(g) for g in groups.values()] == [
+                min(n, len(in_split) - n * k) for k in range(len(groups))
+            ]
+            for g in groups.values():
+                assert len({s.seed for s in g}) == len(g)
+                assert all(s.params == g[0].params for s in g)
+            thetas = [tuple(g[0].params.values()) for g in groups.values()]
+            assert len(set(thetas)) == len(thetas)
+
+
+def test_seeds_per_theta_is_validated():
+    for bad in (0, -2):
+        with pytest.raises(UserInputError, match="--seeds-per-theta must be a whole number of at least 1"):
+            TINY.with_overrides(seeds_per_theta=bad)
+        with pytest.raises(ValueError, match="seeds_per_theta must be at least 1"):
+            DatasetPreset(name="x", sims=SplitCounts(2, 0, 0), renders=SplitCounts(2, 0, 0), seeds_per_theta=bad)
+
+
+def test_cli_seeds_per_theta_gives_theta_groups_of_seeds_times_renders(wave_registry, tmp_path):
+    from typer.testing import CliRunner
+
+    from physinfer.cli.dataset_cmd import dataset_app
+
+    runner = CliRunner()
+    root = tmp_path / "d"
+    args = ["generate", "--plugin", "wave", "--out", str(root), "--sims", "6,2,2"]
+    args += ["--renders-per-sim", "2", "--frames", "8", "--size", "16", "--workers", "0", "--json"]
+    result = runner.invoke(dataset_app, [*args, "--seeds-per-theta", "2"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((root / "dataset.json").read_text())["config"]["preset"]["seeds_per_theta"] == 2
+
+    for split in SPLITS:
+        ds = ClipDataset(root, split)
+        # The grouping `physinfer train --positives parameters` uses: clips with identical θ.
+        _, theta_groups, theta_sizes = np.unique(ds.params, axis=0, return_inverse=True, return_counts=True)
+        _, sim_sizes = np.unique(ds.sim_ids, return_counts=True)
+        assert set(theta_sizes) == {2 * 2} and set(sim_sizes) == {2}
+        for group in range(len(theta_sizes)):
+            sims = np.unique(ds.sim_ids[theta_groups.reshape(-1) == group])
+            trajectories = [ds.trajectory(int(s)).vertices for s in sims]
+            assert len(sims) == 2 and not np.array_equal(*trajectories)  # two seeds, two realisations
+
+    # The option is part of the dataset's identity: resuming with another value is refused.
+    other = runner.invoke(dataset_app, [*args, "--seeds-per-theta", "3"])
+    assert other.exit_code == 2 and "seeds_per_theta: 2 there, 3 now" in json.loads(other.stdout)["error"]
+    plain = runner.invoke(dataset_app, args)
+    assert plain.exit_code == 2 and "seeds_per_theta" in json.loads(plain.stdout)["error"]
+    bad = runner.invoke(dataset_app, [*args[:4], str(tmp_path / "e"), "--seeds-per-theta", "0", "--json"])
+    assert bad.exit_code == 2 and "--seeds-per-theta must be a whole number" in json.loads(bad.stdout)["error"]

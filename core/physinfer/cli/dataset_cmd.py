@@ -50,6 +50,14 @@ def generate_cmd(
     sims_per_unit: Annotated[
         int | None, typer.Option("--sims-per-unit", help="Simulations batched per work unit (one shard).")
     ] = None,
+    seeds_per_theta: Annotated[
+        int | None,
+        typer.Option(
+            "--seeds-per-theta",
+            help="Consecutive simulations sharing one θ with different simulator seeds (default 1: "
+            "every simulation its own θ); gives positives across seeds for `train --positives parameters`.",
+        ),
+    ] = None,
     workers: Annotated[
         int | None, typer.Option("--workers", help="Local worker processes (default: CPU count; 0: this process).")
     ] = None,
@@ -74,6 +82,7 @@ def generate_cmd(
             size=size,
             rgb=rgb,
             sims_per_unit=sims_per_unit,
+            seeds_per_theta=seeds_per_theta,
             workers=workers,
             scheduler=scheduler,
             seed=seed,
@@ -104,6 +113,7 @@ def _generate(
     size: str | None,
     rgb: bool,
     sims_per_unit: int | None,
+    seeds_per_theta: int | None,
     workers: int | None,
     scheduler: str | None,
     seed: int,
@@ -124,11 +134,13 @@ def _generate(
         n_frames=frames,
         size=_parse_size(size) if size is not None else None,
         channels=3 if rgb else None,
+        seeds_per_theta=seeds_per_theta,
     )
+    sharing = f", {chosen.seeds_per_theta} seeds per θ" if chosen.seeds_per_theta > 1 else ""
     where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
     _stderr(
         f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
-        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps "
+        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing} "
         f"→ {out} ({where})"
     )
     with _RichProgress() as progress:

@@ -2,7 +2,10 @@
 
 Randomness is keyed, never sequential: the seeds of simulation ``local`` of split ``s``
 come from ``SeedSequence(seed, spawn_key=(s, local, stream, ...))`` with stream 0 for θ,
-1 for the simulator's seed and ``(2, r)`` for ζ of render ``r``. So a dataset does not
+1 for the simulator's seed and ``(2, r)`` for ζ of render ``r``. With the preset's
+``seeds_per_theta`` = n > 1, θ of simulation ``local`` comes from the θ stream of
+``local // n`` instead, so n consecutive simulations share θ while each keeps its own
+simulator seed (n = 1 is the plain rule). So a dataset does not
 depend on how many workers made it or in which order units finished, and growing one
 split leaves the simulations of the others unchanged. Units are consecutive runs of at
 most ``sims_per_unit`` simulations of one split; their composition is fixed by the
@@ -84,6 +87,9 @@ class UnitPlan:
 def plan_dataset(generator: DatasetGenerator, preset: DatasetPreset, seed: int) -> list[UnitPlan]:
     """Sample θ and seeds of every simulation and group them into units.
 
+    Simulation ``local`` of a split takes θ from the key of
+    ``local // preset.seeds_per_theta`` and its simulator seed from its own key.
+
     Raises:
         ValueError: when the generator samples θ outside its parameter space.
     """
@@ -92,7 +98,10 @@ def plan_dataset(generator: DatasetGenerator, preset: DatasetPreset, seed: int) 
     for split in SPLITS:
         sims: list[SimulationPlan] = []
         for local in range(preset.sims[split]):
-            params = generator.sample_params(np.random.default_rng(seed_sequence(seed, split, local, THETA_STREAM)))
+            theta_key = local // preset.seeds_per_theta
+            params = generator.sample_params(
+                np.random.default_rng(seed_sequence(seed, split, theta_key, THETA_STREAM))
+            )
             _check_within_bounds(generator, params)
             sim_seed = int(seed_sequence(seed, split, local, SIM_STREAM).generate_state(1)[0] & 0x7FFFFFFF)
             n_renders = preset.renders_of(split, local)

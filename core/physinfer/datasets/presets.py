@@ -4,8 +4,8 @@ A preset fixes how many simulations and renders each split holds, the stored cli
 format and how many simulations one work unit batches. ``paper`` reproduces FlagSim
 (Runia et al.): 1,000/150/85 simulations and 14,000/3,800/3,500 renders of 60 frames
 at 25 fps, 300×300. ``cpu`` is the small set the shipped default embedder is trained
-on. Command-line overrides (``--sims``, ``--renders-per-sim``) derive a new preset
-with :meth:`DatasetPreset.with_counts`.
+on. Command-line overrides (``--sims``, ``--renders-per-sim``, ``--seeds-per-theta``)
+derive a new preset with :meth:`DatasetPreset.with_overrides`.
 """
 
 from __future__ import annotations
@@ -139,6 +139,10 @@ class DatasetPreset:
         sims_per_unit: Simulations batched into one work unit (one shard file). Part of
             the dataset's identity: batched simulators need not give bit-identical
             results for different batch compositions.
+        seeds_per_theta: Consecutive simulations of a split that share one θ and differ
+            only in the simulator's seed (1: every simulation draws its own θ). More than
+            one gives positives across simulation seeds (``--positives parameters`` when
+            training an embedder). Part of the dataset's identity.
         description: One line for humans.
     """
 
@@ -147,6 +151,7 @@ class DatasetPreset:
     renders: SplitCounts
     clip: ClipFormat = ClipFormat()
     sims_per_unit: int = 4
+    seeds_per_theta: int = 1
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -161,6 +166,10 @@ class DatasetPreset:
             raise ValueError(f"preset {self.name!r} has no simulations")
         if self.sims_per_unit < 1:
             raise ValueError(f"sims_per_unit must be at least 1, got {self.sims_per_unit}")
+        if isinstance(self.seeds_per_theta, bool) or not isinstance(self.seeds_per_theta, int):
+            raise ValueError(f"seeds_per_theta must be an integer, got {self.seeds_per_theta!r}")
+        if self.seeds_per_theta < 1:
+            raise ValueError(f"seeds_per_theta must be at least 1, got {self.seeds_per_theta}")
         for split in SPLITS:
             s, r = self.sims[split], self.renders[split]
             if r < s or (s == 0 and r > 0):
@@ -183,6 +192,7 @@ class DatasetPreset:
         n_frames: int | None = None,
         size: tuple[int, int] | None = None,
         channels: int | None = None,
+        seeds_per_theta: int | None = None,
     ) -> DatasetPreset:
         """A copy with other counts or clip format (the command-line overrides).
 
@@ -196,14 +206,22 @@ class DatasetPreset:
             n_frames: Frames per stored clip.
             size: ``(H, W)`` of stored clips.
             channels: 1 (grayscale) or 3 (RGB) stored clips.
+            seeds_per_theta: Consecutive simulations sharing one θ (see the class).
 
         Raises:
-            UserInputError: for a count that leaves no simulation at all, or an invalid
-                clip format.
+            UserInputError: for a count that leaves no simulation at all, an invalid
+                clip format, or ``seeds_per_theta`` below 1.
         """
         new_sims = self.sims if sims is None else _as_split_counts(sims, self.sims)
         if new_sims.total < 1:
             raise UserInputError("--sims must give at least one simulation")
+        if seeds_per_theta is not None and (
+            isinstance(seeds_per_theta, bool) or not isinstance(seeds_per_theta, int) or seeds_per_theta < 1
+        ):
+            raise UserInputError(
+                f"--seeds-per-theta must be a whole number of at least 1 (1: every simulation draws "
+                f"its own θ), got {seeds_per_theta!r}"
+            )
         if renders_per_sim is None:
             renders = SplitCounts(
                 **{
@@ -228,7 +246,11 @@ class DatasetPreset:
         if channels is not None:
             clip_changes["channels"] = channels
         changed = (
-            sims is not None or renders_per_sim is not None or sims_per_unit is not None or bool(clip_changes)
+            sims is not None
+            or renders_per_sim is not None
+            or sims_per_unit is not None
+            or (seeds_per_theta is not None and seeds_per_theta != self.seeds_per_theta)
+            or bool(clip_changes)
         )
         try:
             return replace(
@@ -238,14 +260,20 @@ class DatasetPreset:
                 sims=new_sims,
                 renders=renders,
                 sims_per_unit=self.sims_per_unit if sims_per_unit is None else sims_per_unit,
+                seeds_per_theta=self.seeds_per_theta if seeds_per_theta is None else seeds_per_theta,
                 clip=replace(self.clip, **clip_changes),
             )
         except ValueError as exc:
             raise UserInputError(str(exc)) from None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description."""
-        return {
+        """JSON-ready description.
+
+        ``seeds_per_theta`` appears only when it is not 1, so the stored identity of
+        datasets made before the option existed (and of new ones that do not use it)
+        is unchanged and they still resume.
+        """
+        described: dict[str, Any] = {
             "name": self.name,
             "sims": self.sims.to_dict(),
             "renders": self.renders.to_dict(),
@@ -253,6 +281,9 @@ class DatasetPreset:
             "sims_per_unit": self.sims_per_unit,
             "description": self.description,
         }
+        if self.seeds_per_theta != 1:
+            described["seeds_per_theta"] = self.seeds_per_theta
+        return described
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> DatasetPreset:
@@ -263,6 +294,7 @@ class DatasetPreset:
             renders=SplitCounts.from_dict(d["renders"]),
             clip=ClipFormat.from_dict(d["clip"]),
             sims_per_unit=int(d["sims_per_unit"]),
+            seeds_per_theta=int(d.get("seeds_per_theta", 1)),
             description=str(d.get("description", "")),
         )
 
