@@ -17,6 +17,7 @@ from physinfer.diagnose.decide import (
     name_effect,
     null_scale,
     rank_test_less,
+    self_consistency_gap,
 )
 from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.model import model_for_refine, read_model, write_model
@@ -80,6 +81,36 @@ def test_identical_clips_have_no_discrepancy():
 
 
 # --------------------------------------------------------------------------- decisions
+
+
+def test_self_consistency_gap_is_the_median_of_the_runs():
+    # One stalled run (2.36) must not set the null scale, nor one lucky run (0.1).
+    assert self_consistency_gap([2.36, 0.2, 0.3]) == pytest.approx(0.3)
+    assert self_consistency_gap([0.1, 0.9, 1.0]) == pytest.approx(0.9)
+    assert self_consistency_gap([0.4, float("nan"), 0.6]) == pytest.approx(0.5)
+    assert self_consistency_gap([]) is None
+    assert null_scale(0.25, self_consistency_gap([2.36, 0.2, 0.3])) == pytest.approx(0.3)
+
+
+def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
+    from physinfer.diagnose.workflow import calibration_seeds
+    from physinfer.noise import noise_seeds
+
+    for seed in (0, 3, 41):
+        pairs = calibration_seeds(seed, 4)
+        # Run 0 is the calibration of earlier versions (an old run directory resumes).
+        assert pairs[0] == (noise_seeds(seed + 7, 1)[0], seed + 1)
+        assert len({t for t, _ in pairs}) == 4 and len({o for _, o in pairs}) == 4
+        assert all(o != seed for _, o in pairs)
+    # Neighbouring diagnosis seeds do not share calibration optimizer seeds.
+    assert not {o for _, o in calibration_seeds(0, 3)} & {o for _, o in calibration_seeds(1, 3)}
+
+
+def test_calibration_runs_must_be_positive(tmp_path: Path):
+    from physinfer.diagnose.workflow import DiagnoseSettings
+
+    with pytest.raises(UserInputError, match="--calibration-runs must be at least 1"):
+        DiagnoseSettings(plugin="pendulum", out=tmp_path, calibration_runs=0).validate()
 
 
 def test_null_scale_and_misspecification():
@@ -250,6 +281,25 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert again["gap_before"] == report["gap_before"]
     model = read_model(out / "model.json")
     assert model.plugin == "pendulum"
+    # Three calibration runs by default, each a stage; the null scale uses their median.
+    gaps = report["self_consistency_gaps"]
+    assert len(gaps) == 3 and all((out / f"calibration-{r}" / "trials.jsonl").is_file() for r in range(3))
+    assert report["self_consistency_gap"] == pytest.approx(float(np.median(gaps)))
+    assert report["settings"]["calibration_runs"] == 3
+
+
+def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):
+    """A diagnosis from before --calibration-runs (one ``calibration/``) continues without redoing it."""
+    target = _pendulum_target(tmp_path, None)
+    first = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1)
+    out = tmp_path / "diag-none"
+    (out / "calibration-0").rename(out / "calibration")  # the layout of the older version
+    trials = (out / "calibration" / "trials.jsonl").read_text()
+    again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=2)
+    assert not (out / "calibration").exists()
+    assert (out / "calibration-0" / "trials.jsonl").read_text() == trials  # resumed, not rerun
+    assert again["self_consistency_gaps"][0] == first["self_consistency_gaps"][0]
+    assert len(again["self_consistency_gaps"]) == 2
 
 
 @pytest.mark.slow

@@ -60,3 +60,9 @@ def test_diagnose_refuses_too_few_floor_samples(tmp_path: Path):
     proc = _run("diagnose", "--plugin", "pendulum", "--floor-samples", "2", "--out", str(tmp_path / "d"), "--json")
     assert proc.returncode == 2
     assert "floor-samples" in json.loads(proc.stdout)["error"]
+
+
+def test_diagnose_refuses_zero_calibration_runs(tmp_path: Path):
+    proc = _run("diagnose", "--plugin", "pendulum", "--calibration-runs", "0", "--out", str(tmp_path / "d"), "--json")
+    assert proc.returncode == 2
+    assert "--calibration-runs must be at least 1" in json.loads(proc.stdout)["error"]

@@ -51,8 +51,15 @@ def diagnose_cmd(
     ] = 6,
     calibrate: Annotated[
         bool,
-        typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinement to calibrate the null scale."),
+        typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
     ] = True,
+    calibration_runs: Annotated[
+        int,
+        typer.Option(
+            "--calibration-runs",
+            help="Self-consistency refinements (>= 1, each --steps trials); the null scale uses their median gap.",
+        ),
+    ] = 3,
     threshold: Annotated[
         float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
     ] = 2.0,
@@ -88,6 +95,7 @@ def diagnose_cmd(
         effects=tuple(effect),
         floor_samples=floor_samples,
         calibrate=calibrate,
+        calibration_runs=calibration_runs,
         rule=DecisionRule(misspecified_factor=threshold),
         videos=not no_video,
     )

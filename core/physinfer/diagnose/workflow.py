@@ -3,8 +3,10 @@
 Stages, each a resumable refinement in its own run directory under ``--out``::
 
     baseline/            the baseline model refined from the centre (``steps`` trials)
-    calibration/         the baseline refined against a synthetic target made at its own
-                         best θ (self-consistency; skipped with ``calibrate=False``)
+    calibration-<r>/     r = 0 … R−1: the baseline refined against a synthetic target made
+                         at its own best θ (self-consistency), each run with its own target
+                         seed and optimizer seed (skipped with ``calibrate=False``); a
+                         ``calibration/`` left by an older version is renamed ``calibration-0/``
     control/             the baseline refined ``effect_steps`` more trials from its best θ
     effect-<name>/       the baseline with <name> switched in, the same budget and warm start
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
@@ -31,6 +33,7 @@ from physinfer.diagnose.decide import (
     misspecification,
     name_effect,
     null_scale,
+    self_consistency_gap,
 )
 from physinfer.diagnose.gap import gap_numbers, measure_gap
 from physinfer.diagnose.localise import LocaliseConfig, localise
@@ -41,7 +44,7 @@ from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.registry import Registry
 from physinfer.roles import Target
-from physinfer.rundir import RunDirectory
+from physinfer.rundir import RUN_FILE, RunDirectory
 
 Log = Callable[[str], None]
 
@@ -66,7 +69,9 @@ class DiagnoseSettings:
         seed: Seed of optimizers and simulations.
         effects: Effects to try (empty: every effect registered for the phenomenon).
         floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
-        calibrate: Run the self-consistency refinement (the null scale's optimizer part).
+        calibrate: Run the self-consistency refinements (the null scale's optimizer part).
+        calibration_runs: ``R``, self-consistency refinements; the null scale uses the
+            median of their gaps (see :mod:`physinfer.diagnose.decide`).
         rule: Decision thresholds.
         localise: Localisation settings.
         videos: Write the side-by-side video.
@@ -88,6 +93,7 @@ class DiagnoseSettings:
     effects: tuple[str, ...] = ()
     floor_samples: int = 6
     calibrate: bool = True
+    calibration_runs: int = 3
     rule: DecisionRule = field(default_factory=DecisionRule)
     localise: LocaliseConfig = field(default_factory=LocaliseConfig)
     videos: bool = True
@@ -100,6 +106,11 @@ class DiagnoseSettings:
         if self.floor_samples < 4:
             raise UserInputError(
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
+            )
+        if self.calibration_runs < 1:
+            raise UserInputError(
+                f"--calibration-runs must be at least 1, got {self.calibration_runs} "
+                "(use --no-calibrate to skip the self-consistency refinements)"
             )
         self.rule.validate()
         try:
@@ -210,6 +221,83 @@ def _calibration_target(
     return Target(clip, dict(params), dict(target.render_params), "self-consistency target at the baseline fit")
 
 
+#: Step between the optimizer seeds of successive calibration runs: any step keeps them
+#: apart from the baseline's seed; a large one also keeps them off the seeds of a diagnosis
+#: run with a neighbouring ``--seed`` (the benchmark's next case).
+CALIBRATION_SEED_STRIDE = 7919
+
+
+def calibration_seeds(seed: int, runs: int) -> list[tuple[int, int]]:
+    """``(target simulation seed, optimizer seed)`` of each self-consistency run.
+
+    Run 0 has the seeds of the single calibration of earlier versions, so an old
+    ``calibration/`` directory continues as ``calibration-0/``. The optimizer seed differs
+    from the baseline's: with the same seed the optimizer would propose the baseline's first
+    trials again, one of which made the target (too easy a test).
+
+    Args:
+        seed: The diagnosis seed.
+        runs: ``R``.
+
+    Returns:
+        ``R`` pairs, all target seeds distinct.
+    """
+    return [(t, seed + 1 + CALIBRATION_SEED_STRIDE * r) for r, t in enumerate(noise_seeds(seed + 7, runs))]
+
+
+def _adopt_single_calibration(out: Path) -> None:
+    """Rename the ``calibration/`` stage of an older diagnosis to ``calibration-0/``."""
+    old, new = out / "calibration", out / "calibration-0"
+    if (old / RUN_FILE).is_file() and not new.exists():
+        old.rename(new)
+
+
+def run_calibration(
+    base: Pipeline,
+    params: Mapping[str, float],
+    target: Target,
+    *,
+    registry: Registry,
+    settings: DiagnoseSettings,
+    steps: int,
+    seeds: Sequence[int],
+) -> list[float]:
+    """Refine the baseline ``R`` times against targets it made itself at ``params``; their gaps.
+
+    Each run ``r`` is the stage ``calibration-<r>/`` (resumable), with its own target seed
+    and optimizer seed from :func:`calibration_seeds` and the baseline's budget; its gap is
+    measured under the diagnosis' re-simulation ``seeds`` like every other model's.
+
+    Args:
+        base: The baseline model.
+        params: The baseline's best θ.
+        target: The real target (its ζ; whether it came from a file).
+        registry: For the optimizer.
+        settings: The diagnosis settings (``calibration_runs``, ``out``).
+        steps: Trials per run (the baseline's).
+        seeds: Re-simulation seeds of the gap measurements.
+
+    Returns:
+        ``R`` self-consistency gaps, in run order.
+    """
+    _adopt_single_calibration(settings.out)
+    gaps = []
+    for r, (target_seed, optimizer_seed) in enumerate(calibration_seeds(settings.seed, settings.calibration_runs)):
+        name = f"calibration-{r}"
+        encode_dir = settings.out / name if settings.target_path is not None else None
+        cal_target = _calibration_target(base, params, target, target_seed, encode_dir)
+        cal = run_stage(
+            name, base, cal_target, registry=registry, settings=settings, steps=steps, start=None,
+            target_label="self-consistency", seed=optimizer_seed,
+        )
+        gap = measure_gap(
+            base, cal.best_params, target.render_params, base.embedder.embed(cal_target.clip), seeds=seeds,
+            cache_dir=settings.out / name,
+        )
+        gaps.append(float(gap.gap))
+    return gaps
+
+
 def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | None = None) -> dict[str, Any]:
     """Run (or continue) a diagnosis end to end; write its outputs; return the JSON report.
 
@@ -251,28 +339,15 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
     gap0 = gap_of(base, baseline.best_params, "baseline")
 
-    # 2. The gap against the noise floor and the self-consistency gap.
-    self_gap = None
+    # 2. The gap against the noise floor and the self-consistency gaps.
+    self_gaps: list[float] = []
     if settings.calibrate:
-        say(f"[2/5] self-consistency: refining the baseline against its own fit ({steps} trials)")
-        cal_seed = noise_seeds(settings.seed + 7, 1)[0]
-        encode_dir = settings.out / "calibration" if settings.target_path is not None else None
-        cal_target = _calibration_target(base, baseline.best_params, target, cal_seed, encode_dir)
-        # Another optimizer seed: with the baseline's own seed the optimizer would propose the
-        # baseline's first trials again, and one of them made this target (too easy a test).
-        cal = run_stage(
-            "calibration", base, cal_target, steps=steps, start=None, target_label="self-consistency",
-            seed=settings.seed + 1, **common,
+        say(
+            f"[2/5] self-consistency: refining the baseline against its own fit "
+            f"({settings.calibration_runs} × {steps} trials)"
         )
-        cal_gap = measure_gap(
-            base,
-            cal.best_params,
-            target.render_params,
-            base.embedder.embed(cal_target.clip),
-            seeds=seeds,
-            cache_dir=settings.out / "calibration",
-        )
-        self_gap = cal_gap.gap
+        self_gaps = run_calibration(base, baseline.best_params, target, steps=steps, seeds=seeds, **common)
+    self_gap = self_consistency_gap(self_gaps)
     scale = null_scale(gap0.floor_q95, self_gap)
     verdict = misspecification(float(gap0.gap), scale, settings.rule)
     say(
@@ -346,7 +421,8 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     say("[5/5] " + (f"named: {named}" if named else "no effect explains the gap") + "; localising and writing outputs")
 
     report = _outputs(
-        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, baseline,
+        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, self_gaps,
+        baseline,
     )
     report["wall_time_s"] = time.perf_counter() - start_time
     atomic_write_json(settings.out / "diagnosis.json", report)
@@ -366,6 +442,7 @@ def _outputs(
     scale: float,
     gap0: NoiseFloor,
     self_gap: float | None,
+    self_gaps: Sequence[float],
     baseline: RefineResult,
 ) -> dict[str, Any]:
     """Localise, draw, write the model file and videos; assemble the report."""
@@ -430,6 +507,7 @@ def _outputs(
         "null_scale": scale,
         "threshold": verdict["threshold"],
         "self_consistency_gap": self_gap,
+        "self_consistency_gaps": list(self_gaps),
         "baseline": {
             "best_params": baseline.best_params,
             "best_distance": baseline.best_distance,
@@ -453,6 +531,7 @@ def _outputs(
             "seed": settings.seed,
             "floor_samples": settings.floor_samples,
             "calibrate": settings.calibrate,
+            "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
