@@ -9,10 +9,20 @@ declared misspecified or given a name), ``wrong_names`` (hidden-effect cases giv
 effect's name), ``median_gap_ratio`` (gap_after / gap_before over the hidden-effect cases)
 and ``confusion`` (hidden → named → count).
 
+Each case's row is also written to ``<out>/<case>/case.json``, so a table can be split over
+processes (``--shard K/N`` with a shared ``--out``) and summarised afterwards from the rows
+on disk (``--merge``, the same case options, nothing is run). A case whose directory holds
+finished stages continues from them.
+
 Example (the numbers in docs/benchmarks.md)::
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_diagnose.py --plugin pendulum \\
         --seeds 5 --steps 16 --optimizer ax --render-size 48 --out /tmp/bench_diagnose
+
+    # the flag table in two processes, then the summary of both
+    ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --shard 0/2 --out DIR &
+    ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --shard 1/2 --out DIR
+    ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --merge --out DIR
 """
 
 from __future__ import annotations
@@ -122,12 +132,18 @@ def _size_key(zeta: dict[str, Any]) -> str:
     return "image_size" if "image_size" in zeta else "size"
 
 
+def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str) -> Path:
+    """The directory of one case (target, truth, diagnosis stages, row)."""
+    return Path(out) / f"{plugin}-{hidden or 'none'}-s{seed}"
+
+
 def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace) -> dict[str, Any]:
-    """Make one target and diagnose it."""
+    """Make one target and diagnose it; the row is also written to ``case.json``."""
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.io import atomic_write_json
 
     registry = load_bench_registry()
-    case_dir = Path(args.out) / f"{plugin}-{hidden or 'none'}-s{seed}"
+    case_dir = case_dir_of(plugin, hidden, seed, args.out)
     truth_file = case_dir / "truth.json"
     if truth_file.is_file():
         truth = json.loads(truth_file.read_text())
@@ -152,10 +168,11 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             embedder=args.embedder,
             seed=seed,
             floor_samples=args.floor_samples,
+            calibration_runs=args.calibration_runs,
             videos=False,
         ),
     )
-    return {
+    row = {
         "plugin": plugin,
         "hidden": hidden,
         "seed": seed,
@@ -167,13 +184,39 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         "noise_floor": report["noise_floor"],
         "null_scale": report["null_scale"],
         "baseline_gap": report["baseline"]["gap"],
+        "self_consistency_gap": report["self_consistency_gap"],
+        "self_consistency_gaps": report["self_consistency_gaps"],
+        "threshold": report["threshold"],
+        "best_baseline_source": report["best_baseline"]["source"],
         "candidates": {
-            c["effect"]: {"gap": c["gap"], "ratio": c["ratio"], "p_value": c["p_value"], "significant": c["significant"]}
+            c["effect"]: {"gap": c["gap"], "ratio": c["ratio"], "p_value": c["p_value"], "significant": c["significant"],
+                          "checks": c["checks"], "effect_params": c["effect_params"]}
             for c in report["candidates"]
         },
         "truth": truth,
         "wall_time_s": time.perf_counter() - t0,
     }
+    atomic_write_json(case_dir / "case.json", row)
+    return row
+
+
+def case_list(args: argparse.Namespace, effects: list[str]) -> list[tuple[str | None, int]]:
+    """Every (hidden effect or None, seed) of the table, in run order."""
+    hidden_list: list[str | None] = list(effects) + ([] if args.no_null else [None])
+    return [(h, s) for s in range(args.first_seed, args.first_seed + args.seeds) for h in hidden_list]
+
+
+def parse_shard(text: str | None) -> tuple[int, int]:
+    """``K/N`` → ``(K, N)``; ``None`` → ``(0, 1)``."""
+    if text is None:
+        return 0, 1
+    try:
+        k, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise SystemExit(f"--shard must look like K/N (e.g. 0/2), got {text!r}") from None
+    if not 0 <= k < n:
+        raise SystemExit(f"--shard K/N needs 0 <= K < N, got {text!r}")
+    return k, n
 
 
 def summarise(cases: list[dict[str, Any]]) -> dict[str, Any]:
@@ -209,17 +252,28 @@ def main() -> None:
     parser.add_argument("--embedder", default=None)
     parser.add_argument("--render-size", type=int, default=None)
     parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--calibration-runs", type=int, default=3)
+    parser.add_argument("--shard", default=None, help="K/N: run every N-th case starting at the K-th")
+    parser.add_argument("--merge", action="store_true", help="summarise the cases' rows under --out; run nothing")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 
     registry = load_bench_registry()
     effects = args.effects if args.effects is not None else registry.effects_of(registry.phenomenon(args.plugin).name)
-    hidden_list: list[str | None] = list(effects) + ([] if args.no_null else [None])
+    all_cases = case_list(args, effects)
     start = time.perf_counter()
     cases = []
-    for seed in range(args.first_seed, args.first_seed + args.seeds):
-        for hidden in hidden_list:
+    if args.merge:
+        for hidden, seed in all_cases:
+            row_file = case_dir_of(args.plugin, hidden, seed, args.out) / "case.json"
+            if row_file.is_file():
+                cases.append(json.loads(row_file.read_text()))
+            else:
+                print(f"missing: {row_file}", file=sys.stderr)
+    else:
+        shard, n_shards = parse_shard(args.shard)
+        for hidden, seed in all_cases[shard::n_shards]:
             case = run_case(args.plugin, hidden, seed, args)
             print(json.dumps({k: case[k] for k in ("hidden", "seed", "named", "misspecified", "gap_ratio")}),
                   file=sys.stderr, flush=True)
@@ -228,6 +282,7 @@ def main() -> None:
         "plugin": args.plugin,
         "settings": {k: v for k, v in vars(args).items()},
         **summarise(cases),
+        "n_missing": len(all_cases) - len(cases) if args.merge else 0,
         "wall_time_s": time.perf_counter() - start,
         "cases": cases,
     }
