@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.fixed import FixedParameters
 from physinfer.io import atomic_write_json
 from physinfer.plugins import load_registry
 from physinfer.refine import RefineConfig, run_refinement
@@ -50,12 +51,17 @@ THETA_SEED, TARGET_SIM_SEED = 100_000, 200_000
 
 
 def make_target(pipeline: Any, index: int) -> Target:
-    """Held-out target ``index``: seeded θ, ζ and simulation seed."""
-    space = pipeline.simulator.parameter_space
+    """Held-out target ``index``: seeded θ, ζ and simulation seed.
+
+    Drawn over every parameter, fixed ones included: with ``--fix`` the refinement holds
+    them at a guess while the target has its own values, as with a real video.
+    """
+    simulator = pipeline.simulator.inner if isinstance(pipeline.simulator, FixedParameters) else pipeline.simulator
+    space = simulator.parameter_space
     rng = np.random.default_rng(THETA_SEED + index)
     truth = space.from_unit(rng.uniform(-1.0, 1.0, len(space)))
     zeta = pipeline.renderer.sample_render_params(rng)
-    trajectory = pipeline.simulator.simulate(truth, seed=TARGET_SIM_SEED + index)
+    trajectory = simulator.simulate(truth, seed=TARGET_SIM_SEED + index)
     clip = pipeline.renderer.render(trajectory, zeta)
     return Target(clip=clip, truth=truth, render_params=zeta, description=f"held-out target {index}")
 
@@ -74,6 +80,8 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     info = {"plugin": args.plugin, "optimizer": optimizer, "seed": 0, "effects": [], "embedder": args.embedder,
             "parameters": pipeline.simulator.parameter_space.to_dict(), "overwrite": True,
             "seeds_per_trial": args.seeds_per_trial}
+    if args.fix:
+        info["fixed"] = dict(pipeline.simulator.fixed)
     factory = registry.get("optimizers", optimizer).load()
     start = time.perf_counter()
     result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info)
@@ -152,6 +160,8 @@ def main() -> None:
     parser.add_argument("--noise-samples", type=int, default=3)
     parser.add_argument("--seeds-per-trial", type=int, default=1)
     parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                        help="hold parameters fixed in the refinements, as `physinfer refine --fix` (repeatable)")
     parser.add_argument("--out", default="runs/bench_refine")
     parser.add_argument("--shard", default="0/1", help="K/N: run only targets with index %% N == K, so N "
                         "processes (or machines sharing --out) split the work; the summary covers every row logged")
@@ -160,12 +170,14 @@ def main() -> None:
 
     registry, _ = load_registry()
     pipeline = build_pipeline(registry, args.plugin, embedder=args.embedder,
-                              weights=Path(args.weights) if args.weights else None)
+                              weights=Path(args.weights) if args.weights else None, fixed=args.fix)
     args.embedder = args.embedder or pipeline.phenomenon.default_embedder
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "results.jsonl"
     settings = {k: v for k, v in vars(args).items() if k not in ("out", "shard")}
+    if not args.fix:
+        del settings["fix"]  # rows logged before --fix existed stay reusable
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):

@@ -25,7 +25,7 @@ from physinfer.roles import Effect, Embedder, Optimizer, Phenomenon, Renderer, S
 from physinfer.rundir import RunDirectory, TrialRecord
 
 #: run.json keys that must match for ``--resume``.
-RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial")
+RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed")
 
 
 @dataclass(frozen=True)

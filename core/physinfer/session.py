@@ -26,6 +26,7 @@ def build_pipeline(
     embedder: str | None = None,
     weights: Path | None = None,
     device: str | None = None,
+    fixed: Sequence[str] = (),
 ) -> Pipeline:
     """Build simulator (with effects), renderer and embedder of a phenomenon.
 
@@ -36,16 +37,30 @@ def build_pipeline(
         embedder: Embedder name, ``None`` for the phenomenon's default; ``""`` for none.
         weights: Embedder weights file (``None``: the shipped default).
         device: torch device for the embedder.
+        fixed: ``NAME=VALUE`` items (patterns allowed) held fixed and left out of θ (see
+            :mod:`physinfer.fixed`).
     """
+    from physinfer.fixed import FixedParameters, resolve_fixed
+
     phenomenon = registry.phenomenon(plugin)
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
     simulator = phenomenon.make_simulator(effect_objs)
+    if fixed:
+        simulator = FixedParameters(simulator, resolve_fixed(simulator.parameter_space, fixed))
     renderer = phenomenon.make_renderer()
     embedder_obj: Any = None
     if embedder != "":
         name = embedder or phenomenon.default_embedder
         embedder_obj = registry.embedder(name, model=str(weights) if weights else None, device=device)
     return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
+
+
+def full_parameter_space(pipeline: Pipeline) -> Any:
+    """Every parameter of the pipeline's simulator, fixed ones included."""
+    from physinfer.fixed import FixedParameters
+
+    simulator = pipeline.simulator
+    return simulator.inner.parameter_space if isinstance(simulator, FixedParameters) else simulator.parameter_space
 
 
 def load_target(
@@ -58,7 +73,7 @@ def load_target(
 ) -> Target:
     """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target."""
     truth_values = parse_float_assignments(truth, "--truth")
-    space = pipeline.simulator.parameter_space
+    space = full_parameter_space(pipeline)
     for name in truth_values:
         space[name]  # unknown names fail with the list of known ones
     if target_path is None:
@@ -88,6 +103,7 @@ def refine(
     effects: Sequence[str] = (),
     model: Path | None = None,
     render_set: Mapping[str, Any] | None = None,
+    fixed: Sequence[str] = (),
     seed: int = 0,
     out: Path,
     resume: bool = False,
@@ -100,7 +116,8 @@ def refine(
     """Run or continue a refinement end to end and write every output into ``out``.
 
     ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
-    in and the refinement is warm-started from its values.
+    in and the refinement is warm-started from its values. ``fixed`` holds parameters at
+    given values (``NAME=VALUE``, patterns allowed) and refines the rest.
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     model_file = None
@@ -109,7 +126,10 @@ def refine(
 
         model_file = model_for_refine(model, plugin, effects)
         effects = model_file.effects
-    pipeline = build_pipeline(registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device)
+    pipeline = build_pipeline(
+        registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed
+    )
+    fixed_values = dict(getattr(pipeline.simulator, "fixed", {}))
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
         steps=budget,
@@ -140,18 +160,23 @@ def refine(
         "overwrite": overwrite,
         "seeds_per_trial": seeds_per_trial,
     }
+    if fixed_values:  # absent when nothing is fixed, so runs from before --fix still resume
+        run_info["fixed"] = fixed_values
     factory = registry.get("optimizers", optimizer).load()
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory
 
         space = pipeline.simulator.parameter_space
-        factory = warm_start_factory(factory, space.to_unit(model_file.start_for(space)))
+        start = model_file.start_for(full_parameter_space(pipeline))  # fixed parameters dropped below
+        factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
     with _progress(budget, enabled=progress) as on_trial:
         result = run_refinement(
             pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
         )
     from physinfer.video import write_video
 
+    if fixed_values:
+        result.extra["fixed"] = fixed_values
     write_video(run_dir.path / "target.mp4", target.clip)
     write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()

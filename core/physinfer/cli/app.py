@@ -227,6 +227,14 @@ def refine_cmd(
     render_set: Annotated[
         list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
     ] = [],  # noqa: B006
+    fix: Annotated[
+        list[str],
+        typer.Option(
+            "--fix",
+            help="Hold a parameter at a known value and leave it out of the search: NAME=VALUE, "
+            "NAME may be a pattern such as 'bend_*' (repeatable).",
+        ),
+    ] = [],  # noqa: B006
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")] = False,
@@ -272,6 +280,7 @@ def refine_cmd(
         effects=effect,
         model=model,
         render_set=parse_render_set(render_set),
+        fixed=fix,
         seed=seed,
         out=out,
         resume=resume,
@@ -291,6 +300,8 @@ def refine_cmd(
         if result.abs_errors and name in result.abs_errors:
             line += f"   (truth {result.ground_truth[name]:.4g}, error {result.abs_errors[name]:.3g})"
         err_console.print(line, highlight=False)
+    for name, value in result.extra.get("fixed", {}).items():
+        err_console.print(f"  {name} = {value:.4g}   (fixed)", highlight=False)
     err_console.print(f"results in {result.run_dir}")
 
 

@@ -1,0 +1,85 @@
+"""Holding parameters fixed (``--fix``), on the pendulum example plugin."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.errors import UserInputError
+from physinfer.fixed import FixedParameters, resolve_fixed
+from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.plugins import load_registry
+from physinfer.rundir import RunDirectory
+from physinfer.session import build_pipeline, refine
+
+BIN = Path(sys.executable).parent / "physinfer"
+SPACE = ParameterSpace(
+    [ParameterSpec("wind", (0.0, 10.0)), ParameterSpec("bend_a", (0.1, 10.0)), ParameterSpec("bend_b", (0.1, 10.0))]
+)
+
+
+def test_patterns_expand_in_the_space_order():
+    assert resolve_fixed(SPACE, ["bend_*=1"]) == {"bend_a": 1.0, "bend_b": 1.0}
+    assert list(resolve_fixed(SPACE, ["bend_b=2", "bend_a=3"])) == ["bend_a", "bend_b"]
+    assert resolve_fixed(SPACE, []) == {}
+
+
+@pytest.mark.parametrize(
+    "items, message",
+    [
+        (["stiff*=1"], "no parameter matches 'stiff\\*'; known parameters: wind, bend_a, bend_b"),
+        (["bend_*=20"], "bend_a=20 is outside its bounds \\[0.1, 10\\]"),
+        (["*=1"], "fixes every parameter"),
+        (["bend_a"], "expects NAME=VALUE"),
+        (["bend_a=stiff"], "value is not a number"),
+    ],
+)
+def test_bad_fixes_are_user_errors(items, message):
+    with pytest.raises(UserInputError, match=message):
+        resolve_fixed(SPACE, items)
+
+
+def test_fixed_simulator_searches_the_free_parameters_and_simulates_the_full_model():
+    registry, _ = load_registry()
+    full = build_pipeline(registry, "pendulum", embedder="")
+    fixed = build_pipeline(registry, "pendulum", embedder="", fixed=["amplitude=40"])
+    assert isinstance(fixed.simulator, FixedParameters)
+    assert fixed.simulator.parameter_space.names == [n for n in full.simulator.parameter_space.names if n != "amplitude"]
+    free = {"length": 0.9, "damping": 0.2}
+    ours = fixed.simulator.simulate(free, seed=3)
+    theirs = full.simulator.simulate({**free, "amplitude": 40.0}, seed=3)
+    np.testing.assert_array_equal(ours.vertices, theirs.vertices)
+    other = full.simulator.simulate({**free, "amplitude": 20.0}, seed=3)
+    assert not np.array_equal(ours.vertices, other.vertices), "the fixed value reaches the simulator"
+
+
+def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "3", "--optimizer", "random", "--fix", "amplitude=40",
+         "--truth", "amplitude=40", "--out", str(out), "--json"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["fixed"] == {"amplitude": 40.0}
+    assert "amplitude" not in data["best_params"] and "amplitude" not in data["abs_errors"]
+    assert all(len(t.x) == 2 for t in RunDirectory(out).read_trials())
+    registry, _ = load_registry()
+    with pytest.raises(UserInputError, match="it was run with fixed=\\{'amplitude': 40.0\\}"):
+        refine(registry, plugin="pendulum", steps=4, optimizer="random", fixed=["amplitude=30"], out=out,
+               resume=True, progress=False)
+
+
+def test_a_bad_fix_fails_before_anything_is_written(tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "3", "--fix", "lenght=1", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 2
+    assert "no parameter matches 'lenght'" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()
