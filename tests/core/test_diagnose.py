@@ -281,25 +281,34 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert again["gap_before"] == report["gap_before"]
     model = read_model(out / "model.json")
     assert model.plugin == "pendulum"
-    # Three calibration runs by default, each a stage; the null scale uses their median.
+    # Three calibration runs by default, each a stage with its own control; the null scale
+    # uses the median of their gaps, and the test uses the best baseline fit's gap.
     gaps = report["self_consistency_gaps"]
-    assert len(gaps) == 3 and all((out / f"calibration-{r}" / "trials.jsonl").is_file() for r in range(3))
-    assert report["self_consistency_gap"] == pytest.approx(float(np.median(gaps)))
-    assert report["settings"]["calibration_runs"] == 3
+    assert len(gaps) == 3 and report["self_consistency_gap"] == pytest.approx(float(np.median(gaps)))
+    for r, run in enumerate(report["calibration"]):
+        assert (out / f"calibration-{r}" / "trials.jsonl").is_file()
+        assert len((out / f"calibration-{r}-control" / "trials.jsonl").read_text().splitlines()) == 2
+        assert run["gap"] == min(run["gap_run"], run["gap_control"])
+    assert len({run["target_seed"] for run in report["calibration"]}) == 3
+    assert report["tested_gap"] == report["gap_before"]
+    assert report["settings"]["calibration_runs"] == 3 and report["settings"]["calibration_control"]
 
 
 def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):
     """A diagnosis from before --calibration-runs (one ``calibration/``) continues without redoing it."""
     target = _pendulum_target(tmp_path, None)
-    first = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1)
+    first = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1, calibration_control=False)
     out = tmp_path / "diag-none"
     (out / "calibration-0").rename(out / "calibration")  # the layout of the older version
     trials = (out / "calibration" / "trials.jsonl").read_text()
-    again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=2)
+    again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=2, calibration_control=False)
     assert not (out / "calibration").exists()
     assert (out / "calibration-0" / "trials.jsonl").read_text() == trials  # resumed, not rerun
     assert again["self_consistency_gaps"][0] == first["self_consistency_gaps"][0]
     assert len(again["self_consistency_gaps"]) == 2
+    # Without calibration controls the test uses the baseline stage's own gap.
+    assert again["tested_gap"] == again["baseline"]["gap"]
+    assert again["calibration"][0]["gap_control"] is None
 
 
 @pytest.mark.slow

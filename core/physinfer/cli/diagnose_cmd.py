@@ -60,6 +60,13 @@ def diagnose_cmd(
             help="Self-consistency refinements (>= 1, each --steps trials); the null scale uses their median gap.",
         ),
     ] = 3,
+    calibration_control: Annotated[
+        bool,
+        typer.Option(
+            "--calibration-control/--no-calibration-control",
+            help="Give each self-consistency run its own control (--effect-steps more trials), as the baseline has.",
+        ),
+    ] = True,
     threshold: Annotated[
         float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
     ] = 2.0,
@@ -96,6 +103,7 @@ def diagnose_cmd(
         floor_samples=floor_samples,
         calibrate=calibrate,
         calibration_runs=calibration_runs,
+        calibration_control=calibration_control,
         rule=DecisionRule(misspecified_factor=threshold),
         videos=not no_video,
     )

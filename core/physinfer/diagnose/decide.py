@@ -94,12 +94,14 @@ def misspecification(gap: float, scale: float, rule: DecisionRule) -> dict[str, 
         rule: Thresholds.
 
     Returns:
-        ``misspecified``, ``threshold`` and ``gap_over_null`` (``None`` for a zero scale).
+        ``misspecified``, ``threshold``, ``tested_gap`` (``gap``) and ``gap_over_null``
+        (``None`` for a zero scale).
     """
     threshold = rule.misspecified_factor * scale
     return {
         "misspecified": bool(gap > threshold),
         "threshold": threshold,
+        "tested_gap": gap,
         "gap_over_null": (gap / scale) if scale > 0 else None,
     }
 

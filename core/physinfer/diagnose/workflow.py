@@ -7,6 +7,8 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
                          at its own best θ (self-consistency), each run with its own target
                          seed and optimizer seed (skipped with ``calibrate=False``); a
                          ``calibration/`` left by an older version is renamed ``calibration-0/``
+    calibration-<r>-control/  with ``calibration_control``: run r refined ``effect_steps``
+                         more trials from its best θ, as ``control/`` continues the baseline
     control/             the baseline refined ``effect_steps`` more trials from its best θ
     effect-<name>/       the baseline with <name> switched in, the same budget and warm start
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
@@ -72,6 +74,11 @@ class DiagnoseSettings:
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; the null scale uses the
             median of their gaps (see :mod:`physinfer.diagnose.decide`).
+        calibration_control: Follow each calibration run with its own control
+            (``effect_steps`` trials warm-started from its best θ), so that a self-consistency
+            gap has the budget of the best baseline fit it is compared with; the
+            misspecification test then uses that best fit's gap (``gap_before``) instead of
+            the baseline stage's.
         rule: Decision thresholds.
         localise: Localisation settings.
         videos: Write the side-by-side video.
@@ -94,6 +101,7 @@ class DiagnoseSettings:
     floor_samples: int = 6
     calibrate: bool = True
     calibration_runs: int = 3
+    calibration_control: bool = True
     rule: DecisionRule = field(default_factory=DecisionRule)
     localise: LocaliseConfig = field(default_factory=LocaliseConfig)
     videos: bool = True
@@ -260,13 +268,18 @@ def run_calibration(
     registry: Registry,
     settings: DiagnoseSettings,
     steps: int,
+    effect_steps: int,
     seeds: Sequence[int],
-) -> list[float]:
+) -> list[dict[str, Any]]:
     """Refine the baseline ``R`` times against targets it made itself at ``params``; their gaps.
 
     Each run ``r`` is the stage ``calibration-<r>/`` (resumable), with its own target seed
     and optimizer seed from :func:`calibration_seeds` and the baseline's budget; its gap is
-    measured under the diagnosis' re-simulation ``seeds`` like every other model's.
+    measured under the diagnosis' re-simulation ``seeds`` like every other model's. With
+    ``settings.calibration_control`` the run continues in ``calibration-<r>-control/`` for
+    ``effect_steps`` trials from its best θ (the same seeds), mirroring ``control/``; the
+    run's gap is then the smaller of the two stages' gaps, as ``gap_before`` is the best of
+    the real target's baseline fits.
 
     Args:
         base: The baseline model.
@@ -275,13 +288,16 @@ def run_calibration(
         registry: For the optimizer.
         settings: The diagnosis settings (``calibration_runs``, ``out``).
         steps: Trials per run (the baseline's).
+        effect_steps: Trials of each run's control (the control's).
         seeds: Re-simulation seeds of the gap measurements.
 
     Returns:
-        ``R`` self-consistency gaps, in run order.
+        One record per run, in run order: ``gap`` (the run's self-consistency gap),
+        ``gap_run`` and ``gap_control`` (``None`` without a control), ``target_seed``,
+        ``optimizer_seed``.
     """
     _adopt_single_calibration(settings.out)
-    gaps = []
+    runs = []
     for r, (target_seed, optimizer_seed) in enumerate(calibration_seeds(settings.seed, settings.calibration_runs)):
         name = f"calibration-{r}"
         encode_dir = settings.out / name if settings.target_path is not None else None
@@ -290,12 +306,34 @@ def run_calibration(
             name, base, cal_target, registry=registry, settings=settings, steps=steps, start=None,
             target_label="self-consistency", seed=optimizer_seed,
         )
-        gap = measure_gap(
-            base, cal.best_params, target.render_params, base.embedder.embed(cal_target.clip), seeds=seeds,
-            cache_dir=settings.out / name,
+        cal_embedding = base.embedder.embed(cal_target.clip)
+        gap = float(
+            measure_gap(
+                base, cal.best_params, target.render_params, cal_embedding, seeds=seeds, cache_dir=settings.out / name
+            ).gap
         )
-        gaps.append(float(gap.gap))
-    return gaps
+        gap_control = None
+        if settings.calibration_control:
+            control = run_stage(
+                f"{name}-control", base, cal_target, registry=registry, settings=settings, steps=effect_steps,
+                start=cal.best_params, target_label="self-consistency", seed=optimizer_seed,
+            )
+            gap_control = float(
+                measure_gap(
+                    base, control.best_params, target.render_params, cal_embedding, seeds=seeds,
+                    cache_dir=settings.out / f"{name}-control",
+                ).gap
+            )
+        runs.append(
+            {
+                "gap": gap if gap_control is None else min(gap, gap_control),
+                "gap_run": gap,
+                "gap_control": gap_control,
+                "target_seed": int(target_seed),
+                "optimizer_seed": int(optimizer_seed),
+            }
+        )
+    return runs
 
 
 def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | None = None) -> dict[str, Any]:
@@ -339,21 +377,20 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
     gap0 = gap_of(base, baseline.best_params, "baseline")
 
-    # 2. The gap against the noise floor and the self-consistency gaps.
-    self_gaps: list[float] = []
+    # 2. The self-consistency runs (the null scale's optimizer part).
+    calibration: list[dict[str, Any]] = []
     if settings.calibrate:
+        per_run = f"{steps} + {effect_steps}" if settings.calibration_control else f"{steps}"
         say(
             f"[2/5] self-consistency: refining the baseline against its own fit "
-            f"({settings.calibration_runs} × {steps} trials)"
+            f"({settings.calibration_runs} × {per_run} trials)"
         )
-        self_gaps = run_calibration(base, baseline.best_params, target, steps=steps, seeds=seeds, **common)
+        calibration = run_calibration(
+            base, baseline.best_params, target, steps=steps, effect_steps=effect_steps, seeds=seeds, **common
+        )
+    self_gaps = [run["gap"] for run in calibration]
     self_gap = self_consistency_gap(self_gaps)
     scale = null_scale(gap0.floor_q95, self_gap)
-    verdict = misspecification(float(gap0.gap), scale, settings.rule)
-    say(
-        f"      gap {gap0.gap:.4g}, noise floor {gap0.floor:.4g}, null scale {scale:.4g} → "
-        + ("misspecified" if verdict["misspecified"] else "within what a correct model leaves")
-    )
 
     # 4. Equal-budget control and one augmented model per effect, all warm-started.
     say(f"[3/5] control: the baseline refined {effect_steps} more trials from its fit")
@@ -391,6 +428,15 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         )
     before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
     gap_before = float(before.gap.gap)
+    # The misspecification test compares like with like: with calibration controls the
+    # self-consistency gaps had the budget of the best baseline fit, without them the
+    # baseline stage's.
+    tested = gap_before if settings.calibrate and settings.calibration_control else float(gap0.gap)
+    verdict = misspecification(tested, scale, settings.rule)
+    say(
+        f"      gap {tested:.4g}, noise floor {gap0.floor:.4g}, null scale {scale:.4g} → "
+        + ("misspecified" if verdict["misspecified"] else "within what a correct model leaves")
+    )
     candidates = []
     for stage in stages[1:]:
         decision = effect_significance(
@@ -421,7 +467,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     say("[5/5] " + (f"named: {named}" if named else "no effect explains the gap") + "; localising and writing outputs")
 
     report = _outputs(
-        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, self_gaps,
+        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
         baseline,
     )
     report["wall_time_s"] = time.perf_counter() - start_time
@@ -442,7 +488,7 @@ def _outputs(
     scale: float,
     gap0: NoiseFloor,
     self_gap: float | None,
-    self_gaps: Sequence[float],
+    calibration: Sequence[Mapping[str, Any]],
     baseline: RefineResult,
 ) -> dict[str, Any]:
     """Localise, draw, write the model file and videos; assemble the report."""
@@ -507,7 +553,9 @@ def _outputs(
         "null_scale": scale,
         "threshold": verdict["threshold"],
         "self_consistency_gap": self_gap,
-        "self_consistency_gaps": list(self_gaps),
+        "self_consistency_gaps": [run["gap"] for run in calibration],
+        "calibration": [dict(run) for run in calibration],
+        "tested_gap": verdict["tested_gap"],
         "baseline": {
             "best_params": baseline.best_params,
             "best_distance": baseline.best_distance,
@@ -532,6 +580,7 @@ def _outputs(
             "floor_samples": settings.floor_samples,
             "calibrate": settings.calibrate,
             "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
+            "calibration_control": settings.calibrate and settings.calibration_control,
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
