@@ -169,6 +169,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             seed=seed,
             floor_samples=args.floor_samples,
             calibration_runs=args.calibration_runs,
+            calibration_control=not args.no_calibration_control,
             videos=False,
         ),
     )
@@ -186,8 +187,10 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         "baseline_gap": report["baseline"]["gap"],
         "self_consistency_gap": report["self_consistency_gap"],
         "self_consistency_gaps": report["self_consistency_gaps"],
+        "calibration": report["calibration"],
+        "tested_gap": report["tested_gap"],
+        "gap_before_source": report["best_baseline"]["source"],
         "threshold": report["threshold"],
-        "best_baseline_source": report["best_baseline"]["source"],
         "candidates": {
             c["effect"]: {"gap": c["gap"], "ratio": c["ratio"], "p_value": c["p_value"], "significant": c["significant"],
                           "checks": c["checks"], "effect_params": c["effect_params"]}
@@ -253,6 +256,9 @@ def main() -> None:
     parser.add_argument("--render-size", type=int, default=None)
     parser.add_argument("--floor-samples", type=int, default=4)
     parser.add_argument("--calibration-runs", type=int, default=3)
+    parser.add_argument("--no-calibration-control", action="store_true",
+                        help="self-consistency runs without their own control (the misspecification test then "
+                             "uses the baseline stage's gap)")
     parser.add_argument("--shard", default=None, help="K/N: run every N-th case starting at the K-th")
     parser.add_argument("--merge", action="store_true", help="summarise the cases' rows under --out; run nothing")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
