@@ -203,6 +203,52 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     return row
 
 
+def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, dict[str, Any]]:
+    """The case's decisions under three calibrations, recomputed from its stored gaps.
+
+    The decisions are functions of the measured gaps, so one finished diagnosis (with
+    ``calibration-<r>/`` and ``calibration-<r>-control/`` stages) answers what a single
+    calibration run (``R1``, run 0 — the earlier default), the median of the runs without
+    their controls (``R3``) and with them (``R3+control``, the default) would have decided.
+    """
+    from physinfer.diagnose.decide import (
+        DecisionRule,
+        misspecification,
+        null_scale,
+        self_consistency_gap,
+    )
+
+    diag = case_dir / "diagnosis"
+    report = json.loads((diag / "diagnosis.json").read_text())
+    decision = DecisionRule(**rule)
+
+    def gap(stage: str) -> float:
+        return float(json.loads((diag / stage / "gap.json").read_text())["summary"]["gap"])
+
+    runs = len(report["calibration"])
+    plain = [gap(f"calibration-{r}") for r in range(runs)]
+    mirrored = [min(gap(f"calibration-{r}"), gap(f"calibration-{r}-control")) for r in range(runs)]
+    q95 = report["baseline"]["floor_q95"]
+    variants = {
+        "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"]),
+        "R3": (self_consistency_gap(plain), report["baseline"]["gap"]),
+        "R3+control": (self_consistency_gap(mirrored), report["gap_before"]),
+    }
+    out = {}
+    for name, (self_gap, tested) in variants.items():
+        scale = null_scale(q95, self_gap)
+        verdict = misspecification(tested, scale, decision)
+        winners = [
+            c for c in report["candidates"]
+            if c["checks"]["beats_seed_noise"] and c["checks"]["pays_for_parameters"] and c["improvement"] > scale
+        ]
+        best = min(winners, key=lambda c: (c["gap"], c["n_params"])) if winners and verdict["misspecified"] else None
+        out[name] = {"self_gap": self_gap, "null_scale": scale, "tested_gap": tested,
+                     "misspecified": verdict["misspecified"], "named": best["effect"] if best else None,
+                     "gap_ratio": best["ratio"] if best else 1.0}
+    return out
+
+
 def case_list(args: argparse.Namespace, effects: list[str]) -> list[tuple[str | None, int]]:
     """Every (hidden effect or None, seed) of the table, in run order."""
     hidden_list: list[str | None] = list(effects) + ([] if args.no_null else [None])
@@ -259,8 +305,10 @@ def main() -> None:
     parser.add_argument("--no-calibration-control", action="store_true",
                         help="self-consistency runs without their own control (the misspecification test then "
                              "uses the baseline stage's gap)")
-    parser.add_argument("--shard", default=None, help="K/N: run every N-th case starting at the K-th")
+    parser.add_argument("--shard", default=None, help="K/N: run the seeds whose index is K modulo N")
     parser.add_argument("--merge", action="store_true", help="summarise the cases' rows under --out; run nothing")
+    parser.add_argument("--compare-calibration", action="store_true",
+                        help="with --merge: each case's decisions under R1, R3 and R3+control (from its stored gaps)")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
@@ -279,15 +327,25 @@ def main() -> None:
                 print(f"missing: {row_file}", file=sys.stderr)
     else:
         shard, n_shards = parse_shard(args.shard)
-        for hidden, seed in all_cases[shard::n_shards]:
+        # By seed, so that each shard's finished cases cover every hidden effect.
+        for hidden, seed in [(h, s) for h, s in all_cases if (s - args.first_seed) % n_shards == shard]:
             case = run_case(args.plugin, hidden, seed, args)
             print(json.dumps({k: case[k] for k in ("hidden", "seed", "named", "misspecified", "gap_ratio")}),
                   file=sys.stderr, flush=True)
             cases.append(case)
+    variants = {}
+    if args.merge and args.compare_calibration:
+        for c in cases:
+            rule = {"misspecified_factor": 2.0, "alpha": 0.05, "per_parameter_factor": 0.8}
+            c["calibration_variants"] = calibration_variants(case_dir_of(args.plugin, c["hidden"], c["seed"], args.out),
+                                                             rule)
+        for name in ("R1", "R3", "R3+control"):
+            variants[name] = summarise([{**c, **c["calibration_variants"][name]} for c in cases])
     out = {
         "plugin": args.plugin,
         "settings": {k: v for k, v in vars(args).items()},
         **summarise(cases),
+        "calibration_variants": variants,
         "n_missing": len(all_cases) - len(cases) if args.merge else 0,
         "wall_time_s": time.perf_counter() - start,
         "cases": cases,
