@@ -17,7 +17,15 @@ one lucky run, costs two more refinements, and is still a budget-matched residua
 run has the baseline's trials). The q95 of the noise floor stays a lower bound for chaotic
 phenomena, where the optimizer's residual can be below the seed noise.
 
-**Misspecified** when the baseline's gap exceeds ``misspecified_factor`` × the null scale.
+Each calibration run has the budget of the fit it is compared with: by default the
+baseline's trials from the centre plus a control's trials from its best θ, and the tested
+gap is then ``gap_before``, the best baseline fit of any stage (see
+:mod:`physinfer.diagnose.workflow`). A misspecified model's best fit often sits on a bound
+of its box (on the pendulum, maximal damping buys the missing drag's fast decay); a target
+made there is hard for a short search from the centre, so a calibration without the
+control's extra trials overstates what a correct model leaves.
+
+**Misspecified** when the tested gap exceeds ``misspecified_factor`` × the null scale.
 
 **An effect counts** (is *significant*) when all three hold:
 
