@@ -1,0 +1,102 @@
+"""Can the embedder see a flag effect at all? Distances with the effect on vs off, no optimizer.
+
+For each wind speed and flag effect (at the middle of the diagnose benchmark's realistic
+strengths), a target is simulated with the effect on (seed 1000); ``K`` re-simulations of the
+*same* θ with the effect on and ``K`` with it off (other seeds) are embedded, and their
+distances to the target compared (medians and a one-sided Mann–Whitney p that "on" is
+closer). When "off" is not farther than "on", the seed noise hides the effect from the
+embedder even at the true base parameters, and no optimizer budget can make the
+discrepancy workflow name it. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
+bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p).
+
+Example (the numbers in docs/benchmarks.md)::
+
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
+        --embedder spectral --render-size 112 --frames 40 --seeds 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import bench_diagnose  # noqa: E402  (the flag_lite phenomenon and the realistic strengths)
+
+#: Each effect switched off (its parameters' off values; the gusts' time scale is moot then).
+OFF: dict[str, dict[str, float]] = {
+    "wind_gusts": {"gust_intensity": 0.0, "gust_timescale": 0.7},
+    "wind_shear": {"shear_exponent": 0.0},
+    "wind_yaw": {"wind_yaw_deg": 0.0},
+}
+
+
+def mid_strength(effect: str) -> dict[str, float]:
+    """The middle of the benchmark's realistic range of each of the effect's parameters."""
+    return {name: (lo + hi) / 2 for name, (lo, hi) in bench_diagnose.STRENGTHS[effect].items()}
+
+
+def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace) -> dict[str, Any]:
+    """Distances to an effect-on target from ``K`` re-simulations with the effect on and off."""
+    from physinfer.diagnose.decide import rank_test_less
+    from physinfer.session import build_pipeline
+
+    pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=args.embedder)
+    base_space = pipeline.phenomenon.parameter_space
+    theta = base_space.from_unit(np.zeros(len(base_space)))
+    theta["wind_speed"] = wind
+    zeta = {**pipeline.renderer.default_render_params, "image_size": args.render_size}
+
+    def embed(params: dict[str, float], seed: int) -> np.ndarray:
+        clip = pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), zeta)
+        return pipeline.embedder.embed(clip)
+
+    t0 = time.perf_counter()
+    on, off = {**theta, **mid_strength(effect)}, {**theta, **OFF[effect]}
+    target = embed(on, 1000)
+    d_on = [float(np.linalg.norm(embed(on, s) - target)) for s in range(1, args.seeds + 1)]
+    d_off = [float(np.linalg.norm(embed(off, s) - target)) for s in range(1, args.seeds + 1)]
+    pipeline.renderer.close()
+    return {
+        "wind": wind,
+        "effect": effect,
+        "strength": mid_strength(effect),
+        "on": float(np.median(d_on)),
+        "off": float(np.median(d_off)),
+        "off_over_on": float(np.median(d_off) / np.median(d_on)),
+        "p_on_closer": rank_test_less(d_on, d_off),
+        "wall_time_s": time.perf_counter() - t0,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--embedder", default="spectral")
+    parser.add_argument("--render-size", type=int, default=112)
+    parser.add_argument("--frames", type=int, default=40, help="clip length (the SDN needs at least 60)")
+    parser.add_argument("--winds", default="3,6", help="wind speeds in m/s, comma-separated")
+    parser.add_argument("--seeds", type=int, default=6, help="K re-simulations per side")
+    args = parser.parse_args()
+
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    registry.scoped("bench_effect_visibility").add_phenomenon(
+        "flag_visibility", lambda **config: bench_diagnose.flag_lite(n_frames=args.frames, **config), "flag_lite"
+    )
+    rows = []
+    for wind in (float(w) for w in args.winds.split(",")):
+        for effect in OFF:
+            rows.append(visibility(registry, effect, wind, args))
+            print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+    print(json.dumps({"settings": vars(args), "rows": rows}))
+
+
+if __name__ == "__main__":
+    main()
