@@ -60,3 +60,22 @@ def test_ax_falls_back_to_a_seeded_random_point_when_the_gp_cannot_be_fitted(mon
     monkeypatch.setattr(opt._client, "get_next_trials", other)
     with pytest.raises(RuntimeError, match="a real bug"):
         opt.ask(1)
+
+
+def test_ax_drops_only_its_duplicate_point_fallback_warning():
+    import logging
+
+    from physinfer.optimizers.ax import AxOptimizer
+
+    AxOptimizer(dim=1, seed=0)
+    seen = []
+    handler = logging.Handler()
+    handler.emit = lambda record: seen.append(record.getMessage())
+    logger = logging.getLogger("ax.generation_strategy.generation_node")
+    logger.addHandler(handler)
+    try:
+        logger.warning("gen failed with error GenerationStrategy exceeded `MAX_GEN_ATTEMPTS` of 5, switching to fallback")
+        logger.warning("a warning worth reading")
+    finally:
+        logger.removeHandler(handler)
+    assert seen == ["a warning worth reading"]

@@ -22,9 +22,23 @@ def _quiet_ax() -> None:
     for name in list(logging.Logger.manager.loggerDict):
         if name.split(".")[0] in ("ax", "botorch", "gpytorch", "linear_operator"):
             logging.getLogger(name).setLevel(logging.WARNING)
+    # Once the GP has converged in a small space (e.g. wind and area weight with the
+    # bending held by --fix) it proposes points already tried; Ax then draws a Sobol point
+    # instead and warns on every step. That fallback is the right move (a repeated θ would
+    # repeat its distance), so the warning is noise to a user.
+    node_logger = logging.getLogger("ax.generation_strategy.generation_node")
+    if not any(isinstance(f, _DropDuplicateFallback) for f in node_logger.filters):
+        node_logger.addFilter(_DropDuplicateFallback())
     import warnings
 
     warnings.filterwarnings("ignore", module="(ax|botorch|gpytorch|linear_operator).*")
+
+
+class _DropDuplicateFallback(logging.Filter):
+    """Drops Ax's "exceeded MAX_GEN_ATTEMPTS ... switching to fallback" warning."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "MAX_GEN_ATTEMPTS" not in record.getMessage()
 
 
 #: Exceptions of a failed GP fit (BoTorch, GPyTorch, linear_operator), matched by name so
