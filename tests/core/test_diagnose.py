@@ -178,6 +178,19 @@ def test_warm_start_first_trial_and_coordinate_map():
     np.testing.assert_allclose(opt.to_x(-np.ones(3)), -np.ones(3))
 
 
+def test_a_warm_start_on_a_bound_does_not_collapse_the_search_onto_it():
+    # The pendulum's case: damping at its upper bound, the effect's drag off at its lower one.
+    start = np.array([1.0, -1.0, 0.2])
+    opt = WarmStartOptimizer(RandomOptimizer(dim=3, seed=0), start)
+    np.testing.assert_allclose(opt.attach(np.zeros(3)).x, start)  # the first trial is the start
+    xs = np.array([t.x for t in opt.ask(400)])
+    on_bound = np.mean(np.isclose(np.abs(xs[:, :2]), 1.0), axis=0)
+    assert np.all(on_bound < 0.02)  # centred exactly on the bound this was one half
+    assert np.all(np.mean(xs[:, :2] > 0, axis=0) > 0.2) and np.all(np.mean(xs[:, :2] < 0, axis=0) > 0.2)
+    z = np.array([0.7, -0.3, 0.1])
+    np.testing.assert_allclose(opt.to_z(opt.to_x(z)), z)
+
+
 def test_warm_started_cma_searches_around_the_start():
     start = np.array([0.8, -0.6])
     opt = WarmStartOptimizer(CMAOptimizer(dim=2, seed=0), start)
