@@ -83,13 +83,15 @@ def test_identical_clips_have_no_discrepancy():
 # --------------------------------------------------------------------------- decisions
 
 
-def test_self_consistency_gap_is_the_median_of_the_runs():
-    # One stalled run (2.36) must not set the null scale, nor one lucky run (0.1).
-    assert self_consistency_gap([2.36, 0.2, 0.3]) == pytest.approx(0.3)
-    assert self_consistency_gap([0.1, 0.9, 1.0]) == pytest.approx(0.9)
-    assert self_consistency_gap([0.4, float("nan"), 0.6]) == pytest.approx(0.5)
+def test_self_consistency_gap_summaries():
+    assert self_consistency_gap([2.36, 0.2, 0.3]) == pytest.approx(2.36)  # max, the default
+    assert self_consistency_gap([2.36, 0.2, 0.3], "median") == pytest.approx(0.3)
+    assert self_consistency_gap([0.4, float("nan"), 0.6], "median") == pytest.approx(0.5)
+    assert self_consistency_gap([0.4, float("nan"), 0.6]) == pytest.approx(0.6)
     assert self_consistency_gap([]) is None
-    assert null_scale(0.25, self_consistency_gap([2.36, 0.2, 0.3])) == pytest.approx(0.3)
+    assert null_scale(0.25, self_consistency_gap([0.1, 0.2, 0.3], "median")) == pytest.approx(0.25)
+    with pytest.raises(UserInputError, match="--calibration-summary must be one of max, median"):
+        DecisionRule(calibration_summary="mean").validate()
 
 
 def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
@@ -295,9 +297,9 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     model = read_model(out / "model.json")
     assert model.plugin == "pendulum"
     # Three calibration runs by default, each a stage with its own control; the null scale
-    # uses the median of their gaps, and the test uses the best baseline fit's gap.
+    # uses the largest of their gaps, and the test uses the best baseline fit's gap.
     gaps = report["self_consistency_gaps"]
-    assert len(gaps) == 3 and report["self_consistency_gap"] == pytest.approx(float(np.median(gaps)))
+    assert len(gaps) == 3 and report["self_consistency_gap"] == pytest.approx(max(gaps))
     for r, run in enumerate(report["calibration"]):
         assert (out / f"calibration-{r}" / "trials.jsonl").is_file()
         assert len((out / f"calibration-{r}-control" / "trials.jsonl").read_text().splitlines()) == 2

@@ -67,6 +67,13 @@ def diagnose_cmd(
             help="Give each self-consistency run its own control (--effect-steps more trials), as the baseline has.",
         ),
     ] = True,
+    calibration_summary: Annotated[
+        str,
+        typer.Option(
+            "--calibration-summary",
+            help="max or median of the self-consistency runs' gaps: the null scale's optimizer part.",
+        ),
+    ] = "max",
     threshold: Annotated[
         float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
     ] = 2.0,
@@ -104,7 +111,7 @@ def diagnose_cmd(
         calibrate=calibrate,
         calibration_runs=calibration_runs,
         calibration_control=calibration_control,
-        rule=DecisionRule(misspecified_factor=threshold),
+        rule=DecisionRule(misspecified_factor=threshold, calibration_summary=calibration_summary),
         videos=not no_video,
     )
     report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))

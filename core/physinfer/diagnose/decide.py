@@ -55,6 +55,9 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 
+#: Accepted values of :attr:`DecisionRule.calibration_summary`.
+CALIBRATION_SUMMARIES = ("max", "median")
+
 
 @dataclass(frozen=True)
 class DecisionRule:
@@ -65,11 +68,14 @@ class DecisionRule:
             null scales.
         alpha: Level of the one-sided rank test of an effect's improvement.
         per_parameter_factor: Each extra parameter must shrink the gap by this factor.
+        calibration_summary: How the ``R`` self-consistency gaps make one: ``"max"`` or
+            ``"median"`` (see the module docstring).
     """
 
     misspecified_factor: float = 2.0
     alpha: float = 0.05
     per_parameter_factor: float = 0.8
+    calibration_summary: str = "max"
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` on thresholds outside their ranges."""
@@ -79,12 +85,19 @@ class DecisionRule:
             raise UserInputError(f"alpha must be in (0, 0.5), got {self.alpha}")
         if not 0.0 < self.per_parameter_factor <= 1.0:
             raise UserInputError(f"the per-parameter factor must be in (0, 1], got {self.per_parameter_factor}")
+        if self.calibration_summary not in CALIBRATION_SUMMARIES:
+            raise UserInputError(
+                f"--calibration-summary must be one of {', '.join(CALIBRATION_SUMMARIES)}, "
+                f"got {self.calibration_summary!r}"
+            )
 
 
-def self_consistency_gap(gaps: Sequence[float]) -> float | None:
-    """The robust summary of ``R`` self-consistency gaps: their median (``None`` when none is finite)."""
+def self_consistency_gap(gaps: Sequence[float], summary: str = "max") -> float | None:
+    """One self-consistency gap from ``R`` runs: their max or median (``None`` when none is finite)."""
     finite = [float(g) for g in gaps if math.isfinite(g)]
-    return float(np.median(finite)) if finite else None
+    if not finite:
+        return None
+    return float(max(finite) if summary == "max" else np.median(finite))
 
 
 def null_scale(floor_q95: float, self_gap: float | None) -> float:

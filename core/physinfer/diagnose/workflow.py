@@ -389,7 +389,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
             base, baseline.best_params, target, steps=steps, effect_steps=effect_steps, seeds=seeds, **common
         )
     self_gaps = [run["gap"] for run in calibration]
-    self_gap = self_consistency_gap(self_gaps)
+    self_gap = self_consistency_gap(self_gaps, settings.rule.calibration_summary)
     scale = null_scale(gap0.floor_q95, self_gap)
 
     # 4. Equal-budget control and one augmented model per effect, all warm-started.
@@ -585,6 +585,7 @@ def _outputs(
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
                 "per_parameter_factor": settings.rule.per_parameter_factor,
+                "calibration_summary": settings.rule.calibration_summary,
             },
         },
         "seeds_checked": [int(s) for s in np.asarray(before.gap.seeds)],
