@@ -209,7 +209,8 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     The decisions are functions of the measured gaps, so one finished diagnosis (with
     ``calibration-<r>/`` and ``calibration-<r>-control/`` stages) answers what a single
     calibration run (``R1``, run 0 — the earlier default), the median of the runs without
-    their controls (``R3``) and with them (``R3+control``, the default) would have decided.
+    their controls (``R3``) and with them (``R3+control``), and the largest run with its
+    control (``R3max+control``) would have decided.
     """
     from physinfer.diagnose.decide import (
         DecisionRule,
@@ -233,6 +234,7 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
         "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"]),
         "R3": (self_consistency_gap(plain), report["baseline"]["gap"]),
         "R3+control": (self_consistency_gap(mirrored), report["gap_before"]),
+        "R3max+control": (max(mirrored) if mirrored else None, report["gap_before"]),
     }
     out = {}
     for name, (self_gap, tested) in variants.items():
@@ -339,7 +341,7 @@ def main() -> None:
             rule = {"misspecified_factor": 2.0, "alpha": 0.05, "per_parameter_factor": 0.8}
             c["calibration_variants"] = calibration_variants(case_dir_of(args.plugin, c["hidden"], c["seed"], args.out),
                                                              rule)
-        for name in ("R1", "R3", "R3+control"):
+        for name in ("R1", "R3", "R3+control", "R3max+control"):
             variants[name] = summarise([{**c, **c["calibration_variants"][name]} for c in cases])
     out = {
         "plugin": args.plugin,
