@@ -209,8 +209,8 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     The decisions are functions of the measured gaps, so one finished diagnosis (with
     ``calibration-<r>/`` and ``calibration-<r>-control/`` stages) answers what a single
     calibration run (``R1``, run 0 — the earlier default), the median of the runs without
-    their controls (``R3``) and with them (``R3+control``), and the largest run with its
-    control (``R3max+control``) would have decided.
+    their controls (``R3``) and with them (``R3+control``), and the largest of the runs with
+    their controls (``R3max+control``, the default) would have decided.
     """
     from physinfer.diagnose.decide import (
         DecisionRule,
@@ -232,9 +232,9 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     q95 = report["baseline"]["floor_q95"]
     variants = {
         "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"]),
-        "R3": (self_consistency_gap(plain), report["baseline"]["gap"]),
-        "R3+control": (self_consistency_gap(mirrored), report["gap_before"]),
-        "R3max+control": (max(mirrored) if mirrored else None, report["gap_before"]),
+        "R3": (self_consistency_gap(plain, "median"), report["baseline"]["gap"]),
+        "R3+control": (self_consistency_gap(mirrored, "median"), report["gap_before"]),
+        "R3max+control": (self_consistency_gap(mirrored, "max"), report["gap_before"]),
     }
     out = {}
     for name, (self_gap, tested) in variants.items():
