@@ -105,3 +105,12 @@ def test_unknown_render_setting_fails_before_simulating(tmp_path):
     assert proc.returncode == 2
     assert "sise" in json.loads(proc.stdout)["error"] and "size" in proc.stderr
     assert not (tmp_path / "p.mp4").exists()
+
+
+def test_refine_suggests_more_search_only_when_the_fit_is_well_above_the_noise_floor():
+    from physinfer.cli.app import NOISE_RATIO_HINT, noise_ratio_hint
+
+    assert noise_ratio_hint(None) is None and noise_ratio_hint(0.9) is None
+    assert noise_ratio_hint(NOISE_RATIO_HINT) is None
+    hint = noise_ratio_hint(2.84)
+    assert "noise ratio 2.84" in hint and "--resume --steps" in hint and "physinfer diagnose" in hint
