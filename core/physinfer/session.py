@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.errors import UserInputError
-from physinfer.parameters import parse_float_assignments
+from physinfer.parameters import ParameterSpace, parse_float_assignments
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.registry import Registry
 from physinfer.roles import Target
@@ -55,7 +55,7 @@ def build_pipeline(
     return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
 
 
-def full_parameter_space(pipeline: Pipeline) -> Any:
+def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
     """Every parameter of the pipeline's simulator, fixed ones included."""
     from physinfer.fixed import FixedParameters
 
