@@ -9,10 +9,18 @@ embedder even at the true base parameters, and no optimizer budget can make the
 discrepancy workflow name it. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
 bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p).
 
+``--features`` asks whether anything could see the effect: ``embedder`` (default) uses the
+embedder; ``localisation`` the diagnosis's own localisation statistics (log band power and
+log motion envelope per region, amplitude non-stationarity; :mod:`physinfer.diagnose.localise`);
+``trajectory`` skips rendering and compares the vertices themselves (per-vertex mean
+position and standard deviation over the clip) — if that cannot tell "off" from "on", no
+video feature can.
+
 Example (the numbers in docs/benchmarks.md)::
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
         --embedder spectral --render-size 112 --frames 40 --seeds 6
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py --features trajectory --frames 100
 """
 
 from __future__ import annotations
@@ -42,20 +50,41 @@ def mid_strength(effect: str) -> dict[str, float]:
     return {name: (lo + hi) / 2 for name, (lo, hi) in bench_diagnose.STRENGTHS[effect].items()}
 
 
+def trajectory_features(vertices: np.ndarray) -> np.ndarray:
+    """Per-vertex mean position and standard deviation over time of ``(T, V, 3)`` vertices."""
+    v = np.asarray(vertices, dtype=np.float64)
+    return np.concatenate([v.mean(axis=0).ravel(), v.std(axis=0).ravel()])
+
+
+def localisation_features(clip: Any) -> np.ndarray:
+    """The localisation statistics of a clip as one vector (log band power and log motion
+    envelope per region, amplitude non-stationarity per region)."""
+    from physinfer.diagnose.localise import LocaliseConfig, spectral_maps
+
+    maps = spectral_maps(clip, fps=clip.fps, n_frames=len(clip.frames), config=LocaliseConfig())
+    return np.concatenate([
+        np.log(maps.region_bands + 1e-9).ravel(), np.log(maps.envelope + 1e-9).ravel(), maps.nonstationarity().ravel()
+    ])
+
+
 def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace) -> dict[str, Any]:
     """Distances to an effect-on target from ``K`` re-simulations with the effect on and off."""
     from physinfer.diagnose.decide import rank_test_less
     from physinfer.session import build_pipeline
 
-    pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=args.embedder)
+    embedder = args.embedder if args.features == "embedder" else ""
+    pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=embedder)
     base_space = pipeline.phenomenon.parameter_space
     theta = base_space.from_unit(np.zeros(len(base_space)))
     theta["wind_speed"] = wind
     zeta = {**pipeline.renderer.default_render_params, "image_size": args.render_size}
 
     def embed(params: dict[str, float], seed: int) -> np.ndarray:
-        clip = pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), zeta)
-        return pipeline.embedder.embed(clip)
+        trajectory = pipeline.simulator.simulate(params, seed=seed)
+        if args.features == "trajectory":
+            return trajectory_features(trajectory.vertices)
+        clip = pipeline.renderer.render(trajectory, zeta)
+        return localisation_features(clip) if args.features == "localisation" else pipeline.embedder.embed(clip)
 
     t0 = time.perf_counter()
     on, off = {**theta, **mid_strength(effect)}, {**theta, **OFF[effect]}
@@ -82,6 +111,8 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=40, help="clip length (the SDN needs at least 60)")
     parser.add_argument("--winds", default="3,6", help="wind speeds in m/s, comma-separated")
     parser.add_argument("--seeds", type=int, default=6, help="K re-simulations per side")
+    parser.add_argument("--features", choices=("embedder", "localisation", "trajectory"), default="embedder",
+                        help="what compares the clips (see the module docstring)")
     args = parser.parse_args()
 
     from physinfer.plugins import load_registry
