@@ -87,7 +87,8 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         return localisation_features(clip) if args.features == "localisation" else pipeline.embedder.embed(clip)
 
     t0 = time.perf_counter()
-    on, off = {**theta, **mid_strength(effect)}, {**theta, **OFF[effect]}
+    strength = {**mid_strength(effect), **{k: v for k, v in args.strength.items() if k in OFF[effect]}}
+    on, off = {**theta, **strength}, {**theta, **OFF[effect]}
     target = embed(on, 1000)
     d_on = [float(np.linalg.norm(embed(on, s) - target)) for s in range(1, args.seeds + 1)]
     d_off = [float(np.linalg.norm(embed(off, s) - target)) for s in range(1, args.seeds + 1)]
@@ -95,7 +96,7 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
     return {
         "wind": wind,
         "effect": effect,
-        "strength": mid_strength(effect),
+        "strength": strength,
         "on": float(np.median(d_on)),
         "off": float(np.median(d_off)),
         "off_over_on": float(np.median(d_off) / np.median(d_on)),
@@ -111,9 +112,15 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=40, help="clip length (the SDN needs at least 60)")
     parser.add_argument("--winds", default="3,6", help="wind speeds in m/s, comma-separated")
     parser.add_argument("--seeds", type=int, default=6, help="K re-simulations per side")
+    parser.add_argument("--strength", action="append", default=[], metavar="NAME=VALUE",
+                        help="an effect parameter's value instead of the middle of the realistic range (repeatable)")
+    parser.add_argument("--effects", default=",".join(OFF), help="effects to test, comma-separated")
     parser.add_argument("--features", choices=("embedder", "localisation", "trajectory"), default="embedder",
                         help="what compares the clips (see the module docstring)")
     args = parser.parse_args()
+    from physinfer.parameters import parse_float_assignments
+
+    args.strength = parse_float_assignments(args.strength, "--strength")
 
     from physinfer.plugins import load_registry
 
@@ -123,7 +130,7 @@ def main() -> None:
     )
     rows = []
     for wind in (float(w) for w in args.winds.split(",")):
-        for effect in OFF:
+        for effect in (e.strip() for e in args.effects.split(",") if e.strip()):
             rows.append(visibility(registry, effect, wind, args))
             print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     print(json.dumps({"settings": vars(args), "rows": rows}))
