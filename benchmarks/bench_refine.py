@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.fixed import FixedParameters
+from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
 from physinfer.plugins import load_registry
 from physinfer.refine import RefineConfig, run_refinement
@@ -56,7 +56,7 @@ def make_target(pipeline: Any, index: int) -> Target:
     Drawn over every parameter, fixed ones included: with ``--fix`` the refinement holds
     them at a guess while the target has its own values, as with a real video.
     """
-    simulator = pipeline.simulator.inner if isinstance(pipeline.simulator, FixedParameters) else pipeline.simulator
+    simulator = split_fixed(pipeline.simulator)[0]
     space = simulator.parameter_space
     rng = np.random.default_rng(THETA_SEED + index)
     truth = space.from_unit(rng.uniform(-1.0, 1.0, len(space)))
@@ -80,8 +80,9 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     info = {"plugin": args.plugin, "optimizer": optimizer, "seed": 0, "effects": [], "embedder": args.embedder,
             "parameters": pipeline.simulator.parameter_space.to_dict(), "overwrite": True,
             "seeds_per_trial": args.seeds_per_trial}
-    if args.fix:
-        info["fixed"] = dict(pipeline.simulator.fixed)
+    fixed = split_fixed(pipeline.simulator)[1]
+    if fixed:
+        info["fixed"] = fixed
     factory = registry.get("optimizers", optimizer).load()
     start = time.perf_counter()
     result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info)

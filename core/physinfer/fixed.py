@@ -83,3 +83,10 @@ class FixedParameters(Simulator):
     def __getattr__(self, name: str) -> Any:
         # Only reached for attributes this wrapper lacks (grid sizes, frame rate, ...).
         return getattr(self.__dict__["inner"], name)
+
+
+def split_fixed(simulator: Simulator) -> tuple[Simulator, dict[str, float]]:
+    """The full simulator behind ``simulator`` and the values it holds fixed (``{}`` if none)."""
+    if isinstance(simulator, FixedParameters):
+        return simulator.inner, dict(simulator.fixed)
+    return simulator, {}

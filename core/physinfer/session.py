@@ -57,10 +57,9 @@ def build_pipeline(
 
 def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
     """Every parameter of the pipeline's simulator, fixed ones included."""
-    from physinfer.fixed import FixedParameters
+    from physinfer.fixed import split_fixed
 
-    simulator = pipeline.simulator
-    return simulator.inner.parameter_space if isinstance(simulator, FixedParameters) else simulator.parameter_space
+    return split_fixed(pipeline.simulator)[0].parameter_space
 
 
 def load_target(
@@ -129,7 +128,9 @@ def refine(
     pipeline = build_pipeline(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed
     )
-    fixed_values = dict(getattr(pipeline.simulator, "fixed", {}))
+    from physinfer.fixed import split_fixed
+
+    fixed_values = split_fixed(pipeline.simulator)[1]
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
         steps=budget,

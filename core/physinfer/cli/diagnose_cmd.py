@@ -57,7 +57,8 @@ def diagnose_cmd(
         int,
         typer.Option(
             "--calibration-runs",
-            help="Self-consistency refinements (>= 1, each --steps trials); the null scale uses their median gap.",
+            help="Self-consistency refinements (>= 1, each --steps trials); --calibration-summary makes their "
+            "gaps one (default: the largest).",
         ),
     ] = 3,
     calibration_control: Annotated[

@@ -72,8 +72,8 @@ class DiagnoseSettings:
         effects: Effects to try (empty: every effect registered for the phenomenon).
         floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
-        calibration_runs: ``R``, self-consistency refinements; the null scale uses the
-            median of their gaps (see :mod:`physinfer.diagnose.decide`).
+        calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
+            (the maximum by default) makes their gaps one (see :mod:`physinfer.diagnose.decide`).
         calibration_control: Follow each calibration run with its own control
             (``effect_steps`` trials warm-started from its best θ), so that a self-consistency
             gap has the budget of the best baseline fit it is compared with; the
