@@ -45,8 +45,9 @@ STRENGTHS: dict[str, dict[str, tuple[float, float]]] = {
     "wind_gusts": {"gust_intensity": (0.25, 0.35), "gust_timescale": (0.4, 1.0)},
     "wind_shear": {"shear_exponent": (0.3, 0.45)},
     "wind_yaw": {"wind_yaw_deg": (25.0, 40.0)},
+    "wind_inclination": {"wind_inclination_deg": (10.0, 20.0)},
 }
-SIGNED = {"wind_yaw_deg"}
+SIGNED = {"wind_yaw_deg", "wind_inclination_deg"}
 #: Base θ drawn from this central share of each parameter's normalised range ...
 BASE_BOX = 0.6
 #: ... except these, drawn from a physical range: drag grows with the swing's speed, so the
@@ -91,13 +92,16 @@ def flag_lite(**config: Any) -> Any:
     return dataclasses.replace(full, parameter_space=lite_space, make_simulator=make)
 
 
-def load_bench_registry() -> Any:
-    """The installed plugins plus the benchmark's ``flag_lite`` phenomenon."""
+def load_bench_registry(frames: int | None = None) -> Any:
+    """The installed plugins plus the benchmark's ``flag_lite`` phenomenon (``frames`` long clips)."""
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()
     if "flag" in registry.entries["phenomena"]:
-        registry.scoped("bench_diagnose").add_phenomenon("flag_lite", flag_lite, "flag, coarse, bending fixed")
+        lengths = {} if frames is None else {"n_frames": frames}
+        registry.scoped("bench_diagnose").add_phenomenon(
+            "flag_lite", lambda **config: flag_lite(**{**lengths, **config}), "flag, coarse, bending fixed"
+        )
     return registry
 
 
@@ -142,7 +146,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.io import atomic_write_json
 
-    registry = load_bench_registry()
+    registry = load_bench_registry(args.frames)
     case_dir = case_dir_of(plugin, hidden, seed, args.out)
     truth_file = case_dir / "truth.json"
     if truth_file.is_file():
@@ -302,6 +306,8 @@ def main() -> None:
     parser.add_argument("--optimizer", default="ax")
     parser.add_argument("--embedder", default=None)
     parser.add_argument("--render-size", type=int, default=None)
+    parser.add_argument("--frames", type=int, default=None,
+                        help="flag_lite: recorded frames per clip (default 40; grid_spectrum needs 100)")
     parser.add_argument("--floor-samples", type=int, default=4)
     parser.add_argument("--calibration-runs", type=int, default=3)
     parser.add_argument("--no-calibration-control", action="store_true",
@@ -315,7 +321,7 @@ def main() -> None:
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 
-    registry = load_bench_registry()
+    registry = load_bench_registry(args.frames)
     effects = args.effects if args.effects is not None else registry.effects_of(registry.phenomenon(args.plugin).name)
     all_cases = case_list(args, effects)
     start = time.perf_counter()

@@ -42,6 +42,7 @@ OFF: dict[str, dict[str, float]] = {
     "wind_gusts": {"gust_intensity": 0.0, "gust_timescale": 0.7},
     "wind_shear": {"shear_exponent": 0.0},
     "wind_yaw": {"wind_yaw_deg": 0.0},
+    "wind_inclination": {"wind_inclination_deg": 0.0},
 }
 
 
@@ -84,15 +85,22 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         if args.features == "trajectory":
             return trajectory_features(trajectory.vertices)
         clip = pipeline.renderer.render(trajectory, zeta)
+        if args.features == "mean_image":
+            from physinfer.video import prepare_for_embedding
+
+            video = prepare_for_embedding(clip, fps=25.0, n_frames=len(clip.frames), size=64)
+            return video.mean(axis=0).reshape(16, 4, 16, 4).mean(axis=(1, 3)).ravel() * 100.0
         return localisation_features(clip) if args.features == "localisation" else pipeline.embedder.embed(clip)
 
     t0 = time.perf_counter()
     strength = {**mid_strength(effect), **{k: v for k, v in args.strength.items() if k in OFF[effect]}}
     on, off = {**theta, **strength}, {**theta, **OFF[effect]}
     target = embed(on, 1000)
-    d_on = [float(np.linalg.norm(embed(on, s) - target)) for s in range(1, args.seeds + 1)]
-    d_off = [float(np.linalg.norm(embed(off, s) - target)) for s in range(1, args.seeds + 1)]
+    x_on = np.stack([embed(on, s) for s in range(1, args.seeds + 1)])
+    x_off = np.stack([embed(off, s) for s in range(1, args.seeds + 1)])
     pipeline.renderer.close()
+    d_on, d_off = np.linalg.norm(x_on - target, axis=1), np.linalg.norm(x_off - target, axis=1)
+    s_on, s_off = energy_scores(x_on, target), energy_scores(x_off, target)
     return {
         "wind": wind,
         "effect": effect,
@@ -100,9 +108,20 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         "on": float(np.median(d_on)),
         "off": float(np.median(d_off)),
         "off_over_on": float(np.median(d_off) / np.median(d_on)),
-        "p_on_closer": rank_test_less(d_on, d_off),
+        "p_on_closer": rank_test_less(d_on.tolist(), d_off.tolist()),
+        "energy_on": float(s_on.mean()),
+        "energy_off": float(s_off.mean()),
+        "energy_off_over_on": float(s_off.mean() / s_on.mean()),
+        "p_energy_on_lower": rank_test_less(s_on.tolist(), s_off.tolist()),
         "wall_time_s": time.perf_counter() - t0,
     }
+
+
+def energy_scores(samples: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Per-sample terms of the energy score ``E|X - y| - E|X - X'| / 2`` (their mean is the score)."""
+    pairwise = np.linalg.norm(samples[:, None, :] - samples[None, :, :], axis=2)
+    k = len(samples)
+    return np.linalg.norm(samples - target, axis=1) - pairwise.sum(axis=1) / (2 * (k - 1))
 
 
 def main() -> None:
@@ -115,7 +134,7 @@ def main() -> None:
     parser.add_argument("--strength", action="append", default=[], metavar="NAME=VALUE",
                         help="an effect parameter's value instead of the middle of the realistic range (repeatable)")
     parser.add_argument("--effects", default=",".join(OFF), help="effects to test, comma-separated")
-    parser.add_argument("--features", choices=("embedder", "localisation", "trajectory"), default="embedder",
+    parser.add_argument("--features", choices=("embedder", "localisation", "trajectory", "mean_image"), default="embedder",
                         help="what compares the clips (see the module docstring)")
     args = parser.parse_args()
     from physinfer.parameters import parse_float_assignments

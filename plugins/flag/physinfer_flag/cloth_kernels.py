@@ -148,6 +148,7 @@ def add_face_forces(
     beta: float,
     wind_x: float,
     wind_y: float,
+    wind_z: float,
     wind_speed: float,
     shear_exp: float,
     z_ref: float,
@@ -166,7 +167,7 @@ def add_face_forces(
         area: ``(F,)`` rest areas (ArcSim uses the material area in both terms).
         stiffness: ``(F, 4)`` stretching stiffnesses from :func:`update_stiffness`.
         beta: Kelvin–Voigt damping time in seconds (stress ``C : (G + β Ġ)``).
-        wind_x, wind_y: Unit horizontal wind direction.
+        wind_x, wind_y, wind_z: Unit wind direction (``wind_z`` ≠ 0 for an inclined wind).
         wind_speed: Speed at ``z_ref`` in m/s; ``shear_exp``: power-law exponent.
         rho_air: Air density (kg/m³) of the normal pressure ``ρ A |v_n| v_n n``.
         c_drag: Tangential drag coefficient (kg/(m²·s)) of ``c A v_t``.
@@ -260,7 +261,7 @@ def add_face_forces(
             third = 1.0 / 3.0
             rx = speed * wind_x - (v[i0, 0] + v[i1, 0] + v[i2, 0]) * third
             ry = speed * wind_y - (v[i0, 1] + v[i1, 1] + v[i2, 1]) * third
-            rz = -(v[i0, 2] + v[i1, 2] + v[i2, 2]) * third
+            rz = speed * wind_z - (v[i0, 2] + v[i1, 2] + v[i2, 2]) * third
             vn = rx * nx + ry * ny + rz * nz
             pn = rho_air * ar * abs(vn) * vn
             ct = c_drag * ar
@@ -463,7 +464,7 @@ def run_flag(
         hinges, hinge_faces, hinge_curvature, hinge_shape, hinge_curve: see
             :func:`add_bending_forces`.
         edges, edge_length: ``(E, 2)``, ``(E,)`` edges for strain limiting.
-        wind_table: ``(K, 3)`` wind samples ``[speed, yaw, shear exponent]``.
+        wind_table: ``(K, 4)`` wind samples ``[speed, yaw, shear exponent, inclination]``.
         wind_scalars: ``[sample dt, z_ref, base direction]``.
         scalars: ``(N_SCALARS,)`` ``[dt, gravity, rho_air, c_drag, beta, strain limit
             (<= 0: off), max speed, max distance, steps between stretching-stiffness
@@ -498,13 +499,15 @@ def run_flag(
     for frame in range(n_frames):
         for _ in range(substeps):
             t = step * dt
-            speed, yaw, shear_exp = wind_at_time(wind_table, sample_dt, t)
-            wind_x = math.cos(base_dir + yaw)
-            wind_y = math.sin(base_dir + yaw)
+            speed, yaw, shear_exp, inclination = wind_at_time(wind_table, sample_dt, t)
+            horizontal = math.cos(inclination)
+            wind_x = horizontal * math.cos(base_dir + yaw)
+            wind_y = horizontal * math.sin(base_dir + yaw)
+            wind_z = math.sin(inclination)
             if step % lookup_every == 0:
                 update_stiffness(x, faces, dm_inv, samples, stiffness)
             force[:, :] = 0.0
-            add_face_forces(x, v, faces, dm_inv, face_area, stiffness, beta, wind_x, wind_y,
+            add_face_forces(x, v, faces, dm_inv, face_area, stiffness, beta, wind_x, wind_y, wind_z,
                             speed, shear_exp, z_ref, rho_air, c_drag, force, normal, inv_normal_length)
             add_bending_forces(x, hinges, hinge_faces, hinge_curvature, hinge_shape, hinge_curve,
                                normal, inv_normal_length, force)
@@ -561,7 +564,7 @@ def run_flag_batch(
 
     Args:
         x0, v0: ``(B, V, 3)`` initial states.
-        inv_mass: ``(B, V)``; hinge_curve: ``(B, H, 5)``; wind_table: ``(B, K, 3)``;
+        inv_mass: ``(B, V)``; hinge_curve: ``(B, H, 5)``; wind_table: ``(B, K, 4)``;
             wind_scalars: ``(B, 3)`` — the per-flag inputs of :func:`run_flag`.
         out: ``(B, T, V, 3)`` float32 recorded positions.
         Other arguments are shared and as in :func:`run_flag`.

@@ -1,12 +1,13 @@
 """The wind the flag feels: a base speed and direction, sampled over time, evaluated per face.
 
 The solver never hard-codes a uniform wind. It reads a :class:`WindSchedule` — the wind
-speed at a reference height, a yaw offset of its direction and a vertical shear exponent,
-sampled every ``dt`` seconds — and evaluates, at every substep and for every face,
-:func:`wind_at_time` (time → speed, yaw, shear) and :func:`shear_factor` (height →
-speed factor). A constant wind is the schedule of one repeated sample. Effects switch
-in gusts (time-varying speed), shear (speed rising with height) and yaw (direction
-offset) by rewriting the samples: :func:`sample_wind` calls each effect's
+speed at a reference height, a yaw offset of its direction, a vertical shear exponent and
+an inclination above the horizontal, sampled every ``dt`` seconds — and evaluates, at
+every substep and for every face, :func:`wind_at_time` (time → speed, yaw, shear,
+inclination) and :func:`shear_factor` (height → speed factor). A constant wind is the
+schedule of one repeated sample. Effects switch in gusts (time-varying speed), shear
+(speed rising with height), yaw (direction offset) and inclination (an updraft or
+downdraft) by rewriting the samples: :func:`sample_wind` calls each effect's
 ``term(state, params, t)`` with a :class:`WindState` at every sample time and keeps the
 state it returns, so no effect needs to touch the compiled solver.
 """
@@ -41,6 +42,8 @@ class WindState:
             ``speed · (z / z_ref)^α`` (0: uniform).
         z_ref: Reference height in metres above the ground (z = 0) where ``speed`` holds.
         seed: The simulation's seed, so that random effects are deterministic per seed.
+        inclination: Angle of the wind above the horizontal, radians (positive: an
+            updraft); ``speed`` is the speed along the inclined direction.
     """
 
     speed: float
@@ -48,6 +51,7 @@ class WindState:
     shear_exponent: float = 0.0
     z_ref: float = 1.0
     seed: int = 0
+    inclination: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -56,8 +60,8 @@ class WindSchedule:
 
     Attributes:
         dt: Sample spacing in seconds.
-        table: ``(K, 3)`` float64 samples ``[speed (m/s), yaw (rad), shear exponent]`` at
-            times ``k * dt``; held constant after the last sample.
+        table: ``(K, 4)`` float64 samples ``[speed (m/s), yaw (rad), shear exponent,
+            inclination (rad)]`` at times ``k * dt``; held constant after the last sample.
         z_ref: Reference height of the speed in metres.
         direction: Base direction in radians from +x, counter-clockwise seen from above.
     """
@@ -96,36 +100,40 @@ def sample_wind(
         The schedule; ``z_ref`` is taken from the base state.
     """
     if not effects:
-        table = np.array([[base.speed, base.yaw, base.shear_exponent]], dtype=np.float64)
+        table = np.array([_row(base)], dtype=np.float64)
         return WindSchedule(dt=dt, table=table, z_ref=base.z_ref, direction=direction)
     params = dict(params or {})
     n = int(math.ceil(duration / dt)) + 2
-    table = np.empty((n, 3), dtype=np.float64)
+    table = np.empty((n, len(_row(base))), dtype=np.float64)
     for k in range(n):
         state = replace(base)
         for effect in effects:
             state = effect.term(state, params, k * dt)
-        table[k] = (state.speed, state.yaw, state.shear_exponent)
+        table[k] = _row(state)
     return WindSchedule(dt=dt, table=table, z_ref=base.z_ref, direction=direction)
 
 
+def _row(state: WindState) -> tuple[float, float, float, float]:
+    """One sample of the solver's wind table."""
+    return (state.speed, state.yaw, state.shear_exponent, state.inclination)
+
+
 @njit(cache=True, error_model="numpy")
-def wind_at_time(table: np.ndarray, sample_dt: float, t: float) -> tuple[float, float, float]:
-    """Speed, yaw and shear exponent at time ``t`` by linear interpolation of ``table`` ``(K, 3)``."""
+def wind_at_time(table: np.ndarray, sample_dt: float, t: float) -> tuple[float, float, float, float]:
+    """Speed, yaw, shear exponent and inclination at time ``t``, interpolating ``table`` ``(K, 4)``."""
     n = table.shape[0]
-    if n == 1:
-        return table[0, 0], table[0, 1], table[0, 2]
     s = t / sample_dt
-    if s <= 0.0:
-        return table[0, 0], table[0, 1], table[0, 2]
+    if n == 1 or s <= 0.0:
+        return table[0, 0], table[0, 1], table[0, 2], table[0, 3]
     k = int(s)
     if k >= n - 1:
-        return table[n - 1, 0], table[n - 1, 1], table[n - 1, 2]
+        return table[n - 1, 0], table[n - 1, 1], table[n - 1, 2], table[n - 1, 3]
     w = s - k
     return (
         (1.0 - w) * table[k, 0] + w * table[k + 1, 0],
         (1.0 - w) * table[k, 1] + w * table[k + 1, 1],
         (1.0 - w) * table[k, 2] + w * table[k + 1, 2],
+        (1.0 - w) * table[k, 3] + w * table[k + 1, 3],
     )
 
 

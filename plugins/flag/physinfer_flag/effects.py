@@ -1,11 +1,11 @@
-"""Physical effects the flag's model can switch in: gusts, vertical shear and a yawed wind.
+"""Physical effects the flag's model can switch in: gusts, vertical shear, yaw and inclination.
 
 Each effect rewrites the wind samples the solver reads (see
 :mod:`physinfer_flag.cloth_wind`): ``term(state, params, t)`` receives the
 :class:`~physinfer_flag.cloth_wind.WindState` at sample time ``t`` and returns a new one.
 The baseline model blows a steady, uniform wind along the base direction; real wind is
 turbulent, grows with height over the ground, and seldom blows exactly where the camera
-set-up assumes. These are the three discrepancies the discrepancy workflow
+set-up assumes, nor always horizontally. These are the four discrepancies the discrepancy workflow
 (``physinfer diagnose``) can name. Every effect is off at its parameters' defaults, so a
 model with an effect switched in reproduces the baseline there (the warm start).
 """
@@ -161,3 +161,30 @@ class WindYaw(Effect):
     def term(self, state: WindState, params: Params, t: float) -> WindState:
         """The same wind turned by the yaw offset (added to any yaw already set)."""
         return replace(state, yaw=state.yaw + math.radians(float(params["wind_yaw_deg"])))
+
+
+class WindInclination(Effect):
+    """An inclined wind: the air flows at ``inclination`` above the horizontal.
+
+    Wind meeting a slope, a roof edge or a rising thermal is lifted (an updraft); behind
+    an obstacle it is pushed down (a downdraft). Over hills and around buildings the
+    mean flow is inclined by 5–20°, so a flag lifts or droops more than a horizontal wind
+    of the same speed would make it. ``speed`` stays the speed along the inclined
+    direction. Off at 0; both signs are physical.
+    """
+
+    name = "wind_inclination"
+    description = "vertical inclination of the wind (updraft or downdraft)"
+    phenomenon = "flag"
+    parameter_space = ParameterSpace(
+        [
+            ParameterSpec(
+                "wind_inclination_deg", (-30.0, 30.0), "deg", "linear",
+                "angle of the wind above the horizontal (positive: updraft)", default=0.0,
+            )
+        ]
+    )
+
+    def term(self, state: WindState, params: Params, t: float) -> WindState:
+        """The same wind inclined by the angle (added to any inclination already set)."""
+        return replace(state, inclination=state.inclination + math.radians(float(params["wind_inclination_deg"])))

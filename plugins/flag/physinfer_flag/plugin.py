@@ -51,3 +51,7 @@ def physinfer_register_effects(registry):
         "wind_yaw", "physinfer_flag.effects:WindYaw", phenomenon="flag",
         description="wind direction offset (yaw) from the assumed direction",
     )
+    registry.add_effect(
+        "wind_inclination", "physinfer_flag.effects:WindInclination", phenomenon="flag",
+        description="vertical inclination of the wind (updraft or downdraft)",
+    )

@@ -44,7 +44,7 @@ def face_forces(x, v, samples, *, beta=0.0, wind=(1.0, 0.0, 0.0), rho=0.0, drag=
     inv_len = np.zeros(1)
     stiffness = np.zeros((1, 4))
     update_stiffness(x, faces, dm, samples, stiffness)
-    add_face_forces(x, v, faces, dm, area, stiffness, beta, wind[0], wind[1], wind[2], 0.0, 1.0, rho, drag,
+    add_face_forces(x, v, faces, dm, area, stiffness, beta, wind[0], wind[1], 0.0, wind[2], 0.0, 1.0, rho, drag,
                     force, normal, inv_len)
     return force, normal
 

@@ -26,10 +26,10 @@ class LinearRamp(Effect):
 
 def test_constant_wind_is_one_sample():
     sched = sample_wind(WindState(speed=4.0, z_ref=2.0), duration=3.0, direction=0.5)
-    assert sched.table.shape == (1, 3)
-    np.testing.assert_array_equal(sched.table[0], [4.0, 0.0, 0.0])
+    assert sched.table.shape == (1, 4)
+    np.testing.assert_array_equal(sched.table[0], [4.0, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(sched.scalars(), [sched.dt, 2.0, 0.5])
-    assert wind_at_time(sched.table, sched.dt, 2.7) == (4.0, 0.0, 0.0)
+    assert wind_at_time(sched.table, sched.dt, 2.7) == (4.0, 0.0, 0.0, 0.0)
 
 
 def test_effects_rewrite_every_sample():
@@ -37,8 +37,9 @@ def test_effects_rewrite_every_sample():
                         params={"ramp": 2.0}, dt=0.1)
     assert sched.table.shape[0] >= 11
     np.testing.assert_allclose(sched.table[:11, 0], 4.0 + 2.0 * 0.1 * np.arange(11))
-    np.testing.assert_allclose(sched.table[:, 1:], np.tile([0.25, 0.1], (sched.table.shape[0], 1)))
-    speed, yaw, shear = wind_at_time(sched.table, sched.dt, 0.55)
+    np.testing.assert_allclose(sched.table[:, 1:], np.tile([0.25, 0.1, 0.0], (sched.table.shape[0], 1)))
+    speed, yaw, shear, inclination = wind_at_time(sched.table, sched.dt, 0.55)
+    assert inclination == 0.0
     assert speed == pytest.approx(4.0 + 2.0 * 0.55) and yaw == pytest.approx(0.25) and shear == pytest.approx(0.1)
     # Before the start and after the end the samples are held.
     assert wind_at_time(sched.table, sched.dt, -1.0)[0] == pytest.approx(4.0)

@@ -10,7 +10,7 @@ import pytest
 from physinfer.errors import UserInputError
 from physinfer.plugins import load_registry
 from physinfer_flag.cloth_wind import WindState, sample_wind
-from physinfer_flag.effects import WindGusts, WindShear, WindYaw, unit_ou_path
+from physinfer_flag.effects import WindGusts, WindInclination, WindShear, WindYaw, unit_ou_path
 from physinfer_flag.simulator import make_simulator
 
 #: A coarse, short flag: the effects' influence shows within a second of simulated time.
@@ -63,14 +63,16 @@ def test_gusts_off_at_zero_intensity_and_speed_never_negative():
     assert strong[:, 0].min() >= 0.0
 
 
-def test_shear_and_yaw_set_their_columns():
+def test_shear_yaw_and_inclination_set_their_columns():
     table = _schedule(WindShear(), {"shear_exponent": 0.3}, duration=1.0)
-    np.testing.assert_allclose(table, np.tile([6.0, 0.0, 0.3], (len(table), 1)))
+    np.testing.assert_allclose(table, np.tile([6.0, 0.0, 0.3, 0.0], (len(table), 1)))
     table = _schedule(WindYaw(), {"wind_yaw_deg": -30.0}, duration=1.0)
-    np.testing.assert_allclose(table, np.tile([6.0, math.radians(-30.0), 0.0], (len(table), 1)))
+    np.testing.assert_allclose(table, np.tile([6.0, math.radians(-30.0), 0.0, 0.0], (len(table), 1)))
+    table = _schedule(WindInclination(), {"wind_inclination_deg": 15.0}, duration=1.0)
+    np.testing.assert_allclose(table, np.tile([6.0, 0.0, 0.0, math.radians(15.0)], (len(table), 1)))
 
 
-@pytest.mark.parametrize("effect", [WindGusts(), WindShear(), WindYaw()])
+@pytest.mark.parametrize("effect", [WindGusts(), WindShear(), WindYaw(), WindInclination()])
 def test_defaults_are_the_baseline_and_bounds_are_checked(effect):
     sim = make_simulator([effect], **SMALL)
     base = make_simulator([], **SMALL).simulate({"wind_speed": 6.0}, seed=3).vertices
@@ -93,6 +95,16 @@ def test_yaw_turns_the_flag_about_the_pole(baseline_motion):
     # Counter-clockwise yaw blows towards +y: the fly end follows, by about sin(40°) of its reach.
     assert left[..., 1].mean() > 0.3 > abs(baseline_motion[..., 1].mean())
     assert right[..., 1].mean() < -0.3
+
+
+def test_inclination_lifts_or_lowers_the_flag(baseline_motion):
+    sim = make_simulator([WindInclination()], **SMALL)
+    up = sim.simulate({"wind_speed": 6.0, "wind_inclination_deg": 25.0}, seed=3).vertices
+    down = sim.simulate({"wind_speed": 6.0, "wind_inclination_deg": -25.0}, seed=3).vertices
+    # An updraft lifts the fly end, a downdraft lowers it; neither turns the flag sideways.
+    height = [v[..., 2].mean() for v in (down, baseline_motion, up)]
+    assert height[0] + 0.02 < height[1] < height[2] - 0.02
+    assert abs(up[..., 1].mean()) < 0.1 and abs(down[..., 1].mean()) < 0.1
 
 
 def test_shear_changes_the_shape_between_top_and_bottom(baseline_motion):
@@ -119,8 +131,9 @@ def test_gusts_change_the_motion_and_depend_on_the_seed(baseline_motion):
 
 def test_effects_are_registered_for_the_flag():
     registry, _ = load_registry()
-    assert {"wind_gusts", "wind_shear", "wind_yaw"} <= set(registry.effects_of("flag"))
-    for name in ("wind_gusts", "wind_shear", "wind_yaw"):
+    names = ("wind_gusts", "wind_shear", "wind_yaw", "wind_inclination")
+    assert set(names) <= set(registry.effects_of("flag"))
+    for name in names:
         effect = registry.effect(name, phenomenon="flag")
         assert effect.name == name and effect.description
         assert registry.get("effects", name).description == effect.description
