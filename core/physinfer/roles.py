@@ -233,7 +233,9 @@ class Phenomenon:
         description: One line.
         parameter_space: The refined parameters θ.
         make_simulator: ``(effects) -> Simulator``; ``effects`` is a sequence of
-            :class:`Effect` to switch in (empty for the baseline model).
+            :class:`Effect` to switch in (empty for the baseline model). A factory that
+            also accepts the keyword ``duration_s`` (record at least that many seconds)
+            lets datasets store clips longer than the simulator's default.
         make_renderer: ``() -> Renderer``.
         default_embedder: Name of a registered embedder used when none is chosen.
         default_target: ``() -> Target``: the embedded synthetic target.

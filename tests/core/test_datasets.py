@@ -7,6 +7,7 @@ local processes and on a real Dask ``LocalCluster``.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import pickle
@@ -62,15 +63,16 @@ class WaveSimulator(Simulator):
 
     parameter_space = SPACE
 
-    def __init__(self, fragile: bool = False) -> None:
+    def __init__(self, fragile: bool = False, n_frames: int = 16) -> None:
         self.fragile = fragile
+        self.n_frames = n_frames
 
     def simulate(self, params, *, seed=0):
         if self.fragile and params["frequency"] > FAIL_ABOVE_HZ:
             raise SimulationFailed("too fast")
         phase = np.random.default_rng(seed).uniform(0, 2 * np.pi)
         x, y = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 5))
-        t = np.arange(16)[:, None] / 25.0
+        t = np.arange(self.n_frames)[:, None] / 25.0
         z = params["amplitude"] * np.sin(2 * np.pi * params["frequency"] * t + 3 * x.ravel() + phase)
         verts = np.stack([np.broadcast_to(x.ravel(), z.shape), np.broadcast_to(y.ravel(), z.shape), z], -1)
         faces = np.array([[0, 1, 6], [1, 7, 6]], dtype=np.int32)
@@ -325,6 +327,30 @@ def test_directory_guards(reference, tmp_path):
             generate_dataset(gen, tmp_path / "busy", preset=TINY, seed=7, workers=0)
     finally:
         lock.release()
+
+
+def make_lasting_wave() -> Phenomenon:
+    """The wave whose simulator factory accepts ``duration_s`` (records as long as asked)."""
+
+    def make_simulator(effects, *, duration_s=None):
+        return WaveSimulator(n_frames=16 if duration_s is None else int(np.ceil(duration_s * 25.0 - 1e-9)))
+
+    return dataclasses.replace(make_wave(), make_simulator=make_simulator)
+
+
+def test_longer_clips_than_the_default_simulation_when_the_phenomenon_allows(reference, tmp_path):
+    long = dataclasses.replace(TINY, clip=dataclasses.replace(TINY.clip, n_frames=40))
+    generate_dataset(PhenomenonDatasetGenerator(phenomenon=make_lasting_wave()), tmp_path / "long",
+                     preset=long, seed=7, workers=0)
+    for split in ("train", "test"):
+        longer, short = ClipDataset(tmp_path / "long", split), ClipDataset(reference, split)
+        assert longer[0].shape[0] == 40
+        # The same seeds: a longer recording starts with the shorter one's frames.
+        np.testing.assert_array_equal(longer[0][:12], short[0])
+    # A phenomenon that cannot record longer says so instead of storing short clips.
+    with pytest.raises(Exception, match="make the phenomenon simulate longer"):
+        generate_dataset(PhenomenonDatasetGenerator(phenomenon=make_wave()), tmp_path / "short",
+                         preset=long, seed=7, workers=0)
 
 
 # -------------------------------------------------------------------- pieces

@@ -14,6 +14,7 @@ built at the stored size subclasses it and names it in ``Phenomenon.dataset_gene
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -129,6 +130,7 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
             self.parameter_space = self.parameter_space.merged(effect.parameter_space)
         self._presets = dict(presets) if presets is not None else None
         self._simulator: Simulator | None = None
+        self._simulator_duration: float | None = None
         self._renderer: Renderer | None = None
 
     def __getstate__(self) -> dict[str, Any]:
@@ -159,8 +161,19 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
     def simulate_batch(
         self, params: Sequence[Params], seeds: Sequence[int], *, clip: ClipFormat
     ) -> list[Trajectory]:
-        """``Simulator.simulate_batch`` of the phenomenon (its own frame count and rate)."""
-        return self.simulator.simulate_batch(params, seeds=seeds)
+        """``Simulator.simulate_batch`` of the phenomenon, recording the clip's duration when
+        its ``make_simulator`` accepts ``duration_s`` (else its own frame count and rate)."""
+        return self._simulator_for(clip).simulate_batch(params, seeds=seeds)
+
+    def _simulator_for(self, clip: ClipFormat) -> Simulator:
+        """The simulator that records at least ``clip``'s duration where the phenomenon allows."""
+        if not accepts_duration(self.record.make_simulator):
+            return self.simulator
+        duration = clip.n_frames / clip.fps
+        if self._simulator is None or self._simulator_duration != duration:
+            self._simulator = self.record.make_simulator(self.effects, duration_s=duration)
+            self._simulator_duration = duration
+        return self._simulator
 
     def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
         """``Renderer.sample_render_params`` of the phenomenon."""
@@ -175,6 +188,15 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def accepts_duration(make_simulator: Any) -> bool:
+    """Whether a ``make_simulator`` factory takes the ``duration_s`` keyword."""
+    try:
+        parameters = inspect.signature(make_simulator).parameters
+    except (TypeError, ValueError):  # builtins and some callables have no signature
+        return False
+    return "duration_s" in parameters
 
 
 def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> DatasetGenerator:

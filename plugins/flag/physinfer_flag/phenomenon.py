@@ -8,6 +8,7 @@ from the centre of the space. The flag refines with the SDN and the weights ship
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from functools import cache
 
@@ -26,11 +27,22 @@ def _default_truth() -> dict[str, float]:
     return truth
 
 
-def make_simulator(effects: Sequence[Effect] = ()):  # noqa: ANN201 - FlagSimulator
-    """The flag simulator at its default configuration."""
+def make_simulator(effects: Sequence[Effect] = (), *, duration_s: float | None = None):  # noqa: ANN201
+    """The flag simulator (a ``FlagSimulator``) at its default configuration.
+
+    Args:
+        effects: Effects switched into the wind.
+        duration_s: Record this many seconds (rounded up to whole frames) instead of the
+            default 60 frames; datasets of longer clips ask for it. A longer recording
+            starts with the same frames as a shorter one of the same seed.
+    """
+    from physinfer_flag.simulator import FlagSimConfig
     from physinfer_flag.simulator import make_simulator as make
 
-    return make(effects)
+    if duration_s is None:
+        return make(effects)
+    fps = FlagSimConfig().fps
+    return make(effects, n_frames=max(1, math.ceil(duration_s * fps - 1e-9)))
 
 
 def make_renderer():  # noqa: ANN201 - FlagRenderer

@@ -314,3 +314,15 @@ def test_each_direction_stiffens_its_own_folds():
         ratio = folds[row + 1] / folds[0]
         others = np.delete(ratio, row)
         assert ratio[row] < 0.9 and ratio[row] < others.min(), (row, ratio)
+
+
+def test_a_longer_recording_starts_with_the_shorter_one():
+    from physinfer_flag.phenomenon import make_simulator as phenomenon_simulator
+
+    assert phenomenon_simulator().config.n_frames == 60
+    assert phenomenon_simulator(duration_s=8.0).config.n_frames == 200  # 25 fps
+    assert phenomenon_simulator(duration_s=0.41).config.n_frames == 11  # rounded up
+    params = {"wind_speed": 5.0}
+    short = make_simulator(grid_u=8, grid_v=6, n_frames=6, warmup_s=0.2).simulate(params, seed=4).vertices
+    long = make_simulator(grid_u=8, grid_v=6, n_frames=12, warmup_s=0.2).simulate(params, seed=4).vertices
+    np.testing.assert_array_equal(long[:6], short)
