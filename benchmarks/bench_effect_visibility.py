@@ -6,15 +6,21 @@ strengths), a target is simulated with the effect on (seed 1000); ``K`` re-simul
 distances to the target compared (medians and a one-sided Mann–Whitney p that "on" is
 closer). When "off" is not farther than "on", the seed noise hides the effect from the
 embedder even at the true base parameters, and no optimizer budget can make the
-discrepancy workflow name it. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
-bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p).
+discrepancy workflow name it. Each row also gives the **energy score** of either side,
+``mean |x_i - y| - mean_{i≠j} |x_i - x_j| / 2`` (a strictly proper score of a predictive
+distribution: it rewards a model whose re-simulations spread like the target's does, so a
+random forcing such as gusts is not penalised for its spread) and a rank test on its
+per-re-simulation terms. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
+bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p, energy_on,
+energy_off, p_energy_on_lower).
 
 ``--features`` asks whether anything could see the effect: ``embedder`` (default) uses the
 embedder; ``localisation`` the diagnosis's own localisation statistics (log band power and
 log motion envelope per region, amplitude non-stationarity; :mod:`physinfer.diagnose.localise`);
 ``trajectory`` skips rendering and compares the vertices themselves (per-vertex mean
 position and standard deviation over the clip) — if that cannot tell "off" from "on", no
-video feature can.
+video feature can. ``mean_image`` is the clip's time-averaged
+grayscale image at 16×16 (the mean shape, which the spectral embedders discard).
 
 Example (the numbers in docs/benchmarks.md)::
 
