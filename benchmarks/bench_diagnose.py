@@ -172,6 +172,8 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             embedder=args.embedder,
             seed=seed,
             floor_samples=args.floor_samples,
+            select_top=args.select_top,
+            select_seeds=args.select_seeds,
             calibration_runs=args.calibration_runs,
             calibration_control=not args.no_calibration_control,
             videos=False,
@@ -309,6 +311,9 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=None,
                         help="flag_lite: recorded frames per clip (default 40; grid_spectrum needs 100)")
     parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--select-top", type=int, default=0,
+                        help="each stage re-simulates its best M trials and keeps the lowest mean (0: off)")
+    parser.add_argument("--select-seeds", type=int, default=3)
     parser.add_argument("--calibration-runs", type=int, default=3)
     parser.add_argument("--no-calibration-control", action="store_true",
                         help="self-consistency runs without their own control (the misspecification test then "

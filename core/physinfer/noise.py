@@ -26,15 +26,20 @@ if TYPE_CHECKING:
     from physinfer.refine import Pipeline
 
 
-def noise_seeds(base_seed: int, n: int) -> list[int]:
+#: Salt of :func:`noise_seeds` unless another is given.
+DEFAULT_SEED_SALT = 0x5EED
+
+
+def noise_seeds(base_seed: int, n: int, *, salt: int = DEFAULT_SEED_SALT) -> list[int]:
     """``n`` distinct seeds derived from ``base_seed``, none equal to it.
 
     Re-simulation seeds must differ from the seed every trial of a refinement uses, or the
-    "re-simulation" would repeat the trial's own clip.
+    "re-simulation" would repeat the trial's own clip. Another ``salt`` gives another,
+    independent set (for re-simulations whose seeds must not repeat those of others).
     """
     if n <= 0:
         return []
-    state = np.random.SeedSequence([int(base_seed), 0x5EED]).generate_state(4 * n + 4, dtype=np.uint32)
+    state = np.random.SeedSequence([int(base_seed), int(salt)]).generate_state(4 * n + 4, dtype=np.uint32)
     seeds: list[int] = []
     for value in (int(v) % (2**31 - 1) for v in state):
         if value != base_seed and value not in seeds:

@@ -49,6 +49,11 @@ class RefineConfig:
         log_objective: Tell the optimizer ``log(D)`` instead of ``D``. The minimiser is the
             same, but the landscape is far smoother (distances span orders of magnitude),
             which suits a GP surrogate; results always report ``D`` itself.
+        select_top: After the run, re-simulate the best ``M`` trials (distinct θ) under
+            ``select_seeds`` fresh seeds each and report the one with the lowest mean
+            fresh distance as the best (0: the lowest logged distance; see
+            :func:`select_best`).
+        select_seeds: Fresh seeds per finalist of the selection.
     """
 
     steps: int = 40
@@ -59,6 +64,8 @@ class RefineConfig:
     seeds_per_trial: int = 1
     floor_samples: int = 0
     log_objective: bool = True
+    select_top: int = 0
+    select_seeds: int = 3
 
     def objective(self, distance: float | None) -> float | None:
         """The value told to the optimizer for a distance (``None`` stays ``None``)."""
@@ -76,6 +83,10 @@ class RefineConfig:
             raise UserInputError(f"--noise-samples must be 0 or at least 2, got {self.noise_samples}")
         if self.floor_samples < 0 or self.floor_samples == 1:
             raise UserInputError(f"--floor-samples must be 0 or at least 2, got {self.floor_samples}")
+        if self.select_top < 0 or self.select_top == 1:
+            raise UserInputError(f"--select-top must be 0 or at least 2, got {self.select_top}")
+        if self.select_seeds < 1:
+            raise UserInputError(f"--select-seeds must be at least 1, got {self.select_seeds}")
         if self.noise_sem is not None and not self.noise_sem >= 0:
             raise UserInputError(f"the noise standard error must be non-negative, got {self.noise_sem}")
 
@@ -213,6 +224,9 @@ def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: Refine
 
 
 NOISE_PRIOR_FILE = "noise_prior.json"
+SELECTION_FILE = "selection.json"
+#: Salt of the selection's seeds, so they repeat neither the trials' nor the noise floor's.
+SELECTION_SEED_SALT = 0x5E1EC7
 
 
 def observation_noise(
@@ -313,7 +327,8 @@ def _run_refinement(
         records = run_dir.read_trials()
     else:
         run_dir.create(run_info, overwrite=bool(run_info.get("overwrite")))
-        (run_dir.path / NOISE_PRIOR_FILE).unlink(missing_ok=True)
+        for stale in (NOISE_PRIOR_FILE, SELECTION_FILE):
+            (run_dir.path / stale).unlink(missing_ok=True)
         records = []
     sem = observation_noise(pipeline, target, target_embedding, run_dir, config)
     optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
@@ -346,11 +361,84 @@ def _run_refinement(
             best = min(best, distance)
         if on_trial is not None:
             on_trial(record, best)
-    result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start)
+    selection = None
+    if config.select_top:
+        selection = select_best(records, pipeline, target, target_embedding, run_dir, config)
+    chosen = None if selection is None else selection["chosen_step"]
+    result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem
+    if selection is not None:
+        result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
     if config.floor_samples:
         result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
     return result
+
+
+def select_best(
+    records: Sequence[TrialRecord],
+    pipeline: Pipeline,
+    target: Target,
+    target_embedding: np.ndarray,
+    run_dir: RunDirectory,
+    config: RefineConfig,
+) -> dict[str, Any] | None:
+    """Choose the best θ among the ``select_top`` best trials by re-simulating them.
+
+    With a chaotic or stochastic phenomenon every logged distance is one noisy draw, and
+    the lowest of many draws is biased towards a θ whose one seed happened to land close
+    (the winner's curse): the trial with the lowest distance is often not the θ whose
+    realisations come closest. Each finalist is simulated again under ``select_seeds``
+    fresh seeds (the same for all, none used by a trial or by the noise floor), and the
+    lowest *mean fresh distance* wins — an unbiased comparison, since the logged distance
+    that made a trial a finalist is not part of its score. Stored in ``selection.json``
+    (a resumed run with the same finalists does not re-simulate).
+
+    Returns:
+        ``{"seeds", "finalists": [{"step", "distance", "resimulated", "score"}],
+        "chosen_step", "selection_s"}``, or ``None`` when fewer than two distinct
+        trials succeeded or every finalist failed under a fresh seed.
+    """
+    from physinfer.noise import noise_seeds
+
+    finalists: list[TrialRecord] = []
+    seen: set[tuple[float, ...]] = set()
+    for record in sorted((r for r in records if r.distance is not None), key=lambda r: r.distance):
+        point = tuple(round(v, 12) for v in record.x)
+        if point not in seen:
+            seen.add(point)
+            finalists.append(record)
+        if len(finalists) == config.select_top:
+            break
+    if len(finalists) < 2:
+        return None
+    seeds = noise_seeds(config.seed, config.select_seeds, salt=SELECTION_SEED_SALT)
+    key = {"steps": [r.step for r in finalists], "seeds": seeds}
+    path = run_dir.path / SELECTION_FILE
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key:
+            return stored
+    t0 = time.perf_counter()
+    rows = []
+    for record in finalists:
+        fresh = [evaluate(pipeline, record.params, target_embedding, target.render_params, s)[0] for s in seeds]
+        ok = all(d is not None for d in fresh)  # a θ that fails under a fresh seed is no winner
+        rows.append({
+            "step": record.step,
+            "distance": record.distance,
+            "resimulated": fresh,
+            "score": float(np.mean(fresh)) if ok else None,
+        })
+    scored = [row for row in rows if row["score"] is not None]
+    if not scored:
+        return None
+    chosen = min(scored, key=lambda row: row["score"])["step"]
+    selection = {
+        "key": key, "seeds": seeds, "finalists": rows, "chosen_step": chosen,
+        "selection_s": time.perf_counter() - t0,
+    }
+    atomic_write_json(path, selection)
+    return selection
 
 
 def final_noise_floor(
@@ -384,8 +472,11 @@ def summarise(
     target: Target,
     run_dir: Path,
     wall_time_s: float,
+    *,
+    chosen_step: int | None = None,
 ) -> RefineResult:
-    """Best trial, errors against truth, and timing totals of a list of trials."""
+    """Best trial (the lowest distance, or the trial of ``chosen_step``), errors against
+    truth, and timing totals of a list of trials."""
     ok = [r for r in records if r.distance is not None]
     if not ok:
         raise UserInputError(
@@ -393,6 +484,8 @@ def summarise(
             "nothing to report. Check the parameter bounds and the simulator settings."
         )
     best = min(ok, key=lambda r: r.distance)
+    if chosen_step is not None:
+        best = next(r for r in ok if r.step == chosen_step)
     truth = dict(target.truth) if target.truth else None
     abs_errors = (
         {n: abs(best.params[n] - truth[n]) for n in names if n in truth and n in best.params} if truth else None

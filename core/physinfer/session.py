@@ -111,6 +111,8 @@ def refine(
     noise_samples: int = 3,
     seeds_per_trial: int = 1,
     floor_samples: int = 4,
+    select_top: int = 0,
+    select_seeds: int = 3,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
@@ -139,6 +141,8 @@ def refine(
         noise_samples=noise_samples,
         seeds_per_trial=seeds_per_trial,
         floor_samples=floor_samples,
+        select_top=select_top,
+        select_seeds=select_seeds,
     )
     config.validate()
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {})

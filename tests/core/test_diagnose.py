@@ -113,6 +113,8 @@ def test_calibration_runs_must_be_positive(tmp_path: Path):
 
     with pytest.raises(UserInputError, match="--calibration-runs must be at least 1"):
         DiagnoseSettings(plugin="pendulum", out=tmp_path, calibration_runs=0).validate()
+    with pytest.raises(UserInputError, match="--select-top must be 0 or at least 2"):
+        DiagnoseSettings(plugin="pendulum", out=tmp_path, select_top=1).validate()
 
 
 def test_null_scale_and_misspecification():

@@ -8,9 +8,9 @@ import pytest
 from physinfer.errors import UserInputError
 from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
-from physinfer.refine import Pipeline, RefineConfig, run_refinement
+from physinfer.refine import SELECTION_FILE, Pipeline, RefineConfig, run_refinement, select_best
 from physinfer.roles import Embedder, Renderer, Simulator, Target
-from physinfer.rundir import RunDirectory
+from physinfer.rundir import RunDirectory, TrialRecord
 from physinfer.types import Clip, Trajectory
 
 SPACE = ParameterSpace([ParameterSpec("a", (0.0, 2.0))])
@@ -115,7 +115,56 @@ def test_seeds_per_trial_costs_that_many_simulations_per_trial(tmp_path, monkeyp
     assert RefineConfig(seeds_per_trial=3, seed=5).trial_seeds()[0] == 5
 
 
-@pytest.mark.parametrize("field, value", [("seeds_per_trial", 0), ("noise_samples", 1), ("floor_samples", -1)])
+@pytest.mark.parametrize(
+    "field, value",
+    [("seeds_per_trial", 0), ("noise_samples", 1), ("floor_samples", -1), ("select_top", 1), ("select_seeds", 0)],
+)
 def test_bad_noise_settings_are_user_errors(field, value):
     with pytest.raises(UserInputError, match=field.replace("_", "-")):
         RefineConfig(**{field: value}).validate()
+
+
+def _record(step, a, distance):
+    x = [a - 1.0]  # SPACE is [0, 2]: x = a - 1
+    return TrialRecord(step=step, index=step, x=x, params={"a": a}, distance=distance)
+
+
+def test_selection_re_simulates_the_finalists_and_undoes_a_lucky_seed(tmp_path, monkeypatch):
+    target = Target(clip=PassRenderer().render(NoisySimulator(0.0).simulate({"a": 1.3})), render_params={})
+    # Step 1 logged the lowest distance, but only by luck: its θ is 0.5 away from the truth.
+    records = [_record(0, 1.0, 0.2), _record(1, 1.8, 0.001), _record(2, 1.3, 0.01), _record(3, 1.3, 0.02)]
+    run_dir = RunDirectory(tmp_path / "run")
+    run_dir.path.mkdir(parents=True)
+    seeds_seen = []
+    original = NoisySimulator.simulate
+
+    def counting(self, params, *, seed=0):
+        seeds_seen.append(seed)
+        return original(self, params, seed=seed)
+
+    monkeypatch.setattr(NoisySimulator, "simulate", counting)
+    config = RefineConfig(seed=4, select_top=3, select_seeds=2)
+    target_embedding = MeanEmbedder().embed(target.clip)
+    selection = select_best(records, pipeline(0.01), target, target_embedding, run_dir, config)
+    # Finalists: the three best *distinct* θ (step 3 repeats step 2's θ); fresh seeds only.
+    assert [f["step"] for f in selection["finalists"]] == [1, 2, 0]
+    assert selection["chosen_step"] == 2
+    assert len(seeds_seen) == 6 and set(seeds_seen) == set(selection["seeds"])
+    assert config.seed not in seeds_seen and not set(seeds_seen) & set(noise_seeds(config.seed, 8))
+    assert (run_dir.path / SELECTION_FILE).is_file()
+    # The same finalists again: read back, nothing re-simulated.
+    again = select_best(records, pipeline(0.01), target, target_embedding, run_dir, config)
+    assert again["chosen_step"] == 2 and len(seeds_seen) == 6
+    # Fewer than two distinct successful trials: nothing to choose between.
+    assert select_best(records[2:], pipeline(0.01), target, target_embedding, run_dir, config) is None
+
+
+def test_refinement_with_selection_reports_the_chosen_trial(tmp_path):
+    result = run(tmp_path, RefineConfig(steps=6, optimizer="random", select_top=3, select_seeds=2))
+    selection = result.extra["selection"]
+    assert len(selection["finalists"]) == 3 and selection["selection_s"] >= 0
+    assert all(len(f["resimulated"]) == 2 for f in selection["finalists"])
+    chosen = min(selection["finalists"], key=lambda f: f["score"])
+    assert result.best_step == selection["chosen_step"] == chosen["step"]
+    assert result.best_distance == chosen["distance"]
+    assert "key" not in selection and json.dumps(result.summary()["selection"])

@@ -38,6 +38,16 @@ def test_refine_end_to_end_writes_every_output(tmp_path):
     assert json.loads((out / "result.json").read_text())["best_distance"] == data["best_distance"]
 
 
+def test_select_top_re_simulates_the_best_trials_and_reports_the_chosen_one(tmp_path):
+    out = tmp_path / "run"
+    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--select-top", "3",
+               "--select-seeds", "2", "--floor-samples", "0", "--out", str(out), "--json")
+    selection = data["selection"]
+    assert [len(f["resimulated"]) for f in selection["finalists"]] == [2, 2, 2]
+    assert data["best_step"] == selection["chosen_step"]
+    assert (out / "selection.json").is_file()
+
+
 def test_ax_recovers_the_example_truth(tmp_path):
     """The documented tolerance of the pendulum example (docs/writing-a-plugin.md)."""
     data = cli("refine", "--plugin", "pendulum", "--steps", "20", "--out", str(tmp_path / "ax"), "--json")

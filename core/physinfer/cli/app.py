@@ -259,6 +259,15 @@ def refine_cmd(
             "--floor-samples", help="Re-simulate the best fit under this many seeds to report the noise floor (0: skip)."
         ),
     ] = 4,
+    select_top: Annotated[
+        int,
+        typer.Option(
+            "--select-top",
+            help="Re-simulate the best M trials under --select-seeds fresh seeds and report the one with the "
+            "lowest mean distance (0: the lowest logged distance).",
+        ),
+    ] = 0,
+    select_seeds: Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")] = 3,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -292,6 +301,8 @@ def refine_cmd(
         noise_samples=noise_samples,
         seeds_per_trial=seeds_per_trial,
         floor_samples=floor_samples,
+        select_top=select_top,
+        select_seeds=select_seeds,
     )
     summary = result.summary()
     if as_json:

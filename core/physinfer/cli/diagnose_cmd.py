@@ -49,6 +49,15 @@ def diagnose_cmd(
     floor_samples: Annotated[
         int, typer.Option("--floor-samples", help="Re-simulations per gap measurement (>= 4).")
     ] = 6,
+    select_top: Annotated[
+        int,
+        typer.Option(
+            "--select-top",
+            help="Re-simulate each stage's best M trials under --select-seeds fresh seeds and keep the lowest "
+            "mean (0: the lowest logged distance; 4 suits chaotic phenomena such as the flag).",
+        ),
+    ] = 0,
+    select_seeds: Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")] = 3,
     calibrate: Annotated[
         bool,
         typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
@@ -109,6 +118,8 @@ def diagnose_cmd(
         seed=seed,
         effects=tuple(effect),
         floor_samples=floor_samples,
+        select_top=select_top,
+        select_seeds=select_seeds,
         calibrate=calibrate,
         calibration_runs=calibration_runs,
         calibration_control=calibration_control,

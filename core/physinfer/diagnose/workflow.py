@@ -71,6 +71,11 @@ class DiagnoseSettings:
         seed: Seed of optimizers and simulations.
         effects: Effects to try (empty: every effect registered for the phenomenon).
         floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
+        select_top: Every stage re-simulates its best ``M`` trials under ``select_seeds``
+            fresh seeds and keeps the lowest mean (0: the lowest logged distance; see
+            :func:`physinfer.refine.select_best`). For chaotic phenomena it keeps the
+            winner's curse out of every stage's best fit, the calibration runs' included.
+        select_seeds: Fresh seeds per finalist.
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
             (the maximum by default) makes their gaps one (see :mod:`physinfer.diagnose.decide`).
@@ -99,6 +104,8 @@ class DiagnoseSettings:
     seed: int = 0
     effects: tuple[str, ...] = ()
     floor_samples: int = 6
+    select_top: int = 0
+    select_seeds: int = 3
     calibrate: bool = True
     calibration_runs: int = 3
     calibration_control: bool = True
@@ -115,6 +122,7 @@ class DiagnoseSettings:
             raise UserInputError(
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
             )
+        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds).validate()
         if self.calibration_runs < 1:
             raise UserInputError(
                 f"--calibration-runs must be at least 1, got {self.calibration_runs} "
@@ -189,7 +197,10 @@ def run_stage(
         "start": None if start is None else {k: float(v) for k, v in start.items()},
         "stage": name,
     }
-    config = RefineConfig(steps=steps, optimizer=settings.optimizer, seed=seed)
+    config = RefineConfig(
+        steps=steps, optimizer=settings.optimizer, seed=seed,
+        select_top=settings.select_top, select_seeds=settings.select_seeds,
+    )
     resume = run_dir.run_file.is_file()
     return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
 
@@ -578,6 +589,8 @@ def _outputs(
             "optimizer": settings.optimizer,
             "seed": settings.seed,
             "floor_samples": settings.floor_samples,
+            "select_top": settings.select_top,
+            "select_seeds": settings.select_seeds,
             "calibrate": settings.calibrate,
             "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
             "calibration_control": settings.calibrate and settings.calibration_control,
