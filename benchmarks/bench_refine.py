@@ -75,6 +75,8 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         noise_samples=args.noise_samples,
         seeds_per_trial=args.seeds_per_trial,
         floor_samples=args.floor_samples,
+        select_top=args.select_top,
+        select_seeds=args.select_seeds,
     )
     run_dir = RunDirectory(out)
     info = {"plugin": args.plugin, "optimizer": optimizer, "seed": 0, "effects": [], "embedder": args.embedder,
@@ -84,8 +86,11 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     if fixed:
         info["fixed"] = fixed
     factory = registry.get("optimizers", optimizer).load()
+    # The trials do not depend on the selection, so a finished run of the same settings is
+    # continued (nothing re-simulated but the selection and the floor) instead of re-run.
+    resume = args.reuse_trials and run_dir.run_file.is_file() and len(run_dir.read_trials()) >= args.steps
     start = time.perf_counter()
-    result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info)
+    result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info, resume=resume)
     wall = time.perf_counter() - start
     floor = result.extra.get("noise_floor") or {}
     return {
@@ -100,6 +105,8 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         "noise_ratio": floor.get("ratio"),
         "observation_sem": result.extra.get("observation_sem"),
         "n_failed": result.n_failed,
+        "trials_reused": resume,
+        "selection_s": (result.extra.get("selection") or {}).get("selection_s"),
     }
 
 
@@ -161,6 +168,11 @@ def main() -> None:
     parser.add_argument("--noise-samples", type=int, default=3)
     parser.add_argument("--seeds-per-trial", type=int, default=1)
     parser.add_argument("--floor-samples", type=int, default=4)
+    parser.add_argument("--select-top", type=int, default=0,
+                        help="report the best of the M best trials re-simulated under --select-seeds fresh seeds")
+    parser.add_argument("--select-seeds", type=int, default=3)
+    parser.add_argument("--reuse-trials", action="store_true",
+                        help="continue finished runs in --out instead of re-running them (e.g. to add --select-top)")
     parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                         help="hold parameters fixed in the refinements, as `physinfer refine --fix` (repeatable)")
     parser.add_argument("--out", default="runs/bench_refine")
@@ -179,6 +191,9 @@ def main() -> None:
     settings = {k: v for k, v in vars(args).items() if k not in ("out", "shard")}
     if not args.fix:
         del settings["fix"]  # rows logged before --fix existed stay reusable
+    if not args.select_top:
+        del settings["select_top"], settings["select_seeds"]  # and rows from before --select-top
+    del settings["reuse_trials"]  # how the trials were obtained does not change them
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):
