@@ -235,7 +235,7 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     runs = len(report["calibration"])
     plain = [gap(f"calibration-{r}") for r in range(runs)]
     mirrored = [min(gap(f"calibration-{r}"), gap(f"calibration-{r}-control")) for r in range(runs)]
-    q95 = report["baseline"]["floor_q95"]
+    floor, q95 = report["baseline"]["floor"], report["baseline"]["floor_q95"]
     variants = {
         "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"]),
         "R3": (self_consistency_gap(plain, "median"), report["baseline"]["gap"]),
@@ -244,7 +244,7 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     }
     out = {}
     for name, (self_gap, tested) in variants.items():
-        scale = null_scale(q95, self_gap)
+        scale = null_scale(floor, q95, self_gap)
         verdict = misspecification(tested, scale, decision)
         winners = [
             c for c in report["candidates"]

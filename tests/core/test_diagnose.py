@@ -89,7 +89,7 @@ def test_self_consistency_gap_summaries():
     assert self_consistency_gap([0.4, float("nan"), 0.6], "median") == pytest.approx(0.5)
     assert self_consistency_gap([0.4, float("nan"), 0.6]) == pytest.approx(0.6)
     assert self_consistency_gap([]) is None
-    assert null_scale(0.25, self_consistency_gap([0.1, 0.2, 0.3], "median")) == pytest.approx(0.25)
+    assert null_scale(0.25, 0.4, self_consistency_gap([0.1, 0.2, 0.3], "median")) == pytest.approx(0.25)
     with pytest.raises(UserInputError, match="--calibration-summary must be one of max, median"):
         DecisionRule(calibration_summary="mean").validate()
 
@@ -118,8 +118,11 @@ def test_calibration_runs_must_be_positive(tmp_path: Path):
 
 
 def test_null_scale_and_misspecification():
-    assert null_scale(1.0, None) == 1.0
-    assert null_scale(1.0, 3.0) == 3.0
+    # Without self-consistency runs: the floor's q95; with them: medians only.
+    assert null_scale(0.5, 1.0, None) == 1.0
+    assert null_scale(0.5, 1.0, 3.0) == 3.0
+    assert null_scale(0.5, 4.0, 0.8) == 0.8  # a tail of the floor does not set the scale
+    assert null_scale(0.9, 4.0, 0.8) == 0.9  # the floor median is the least a model leaves
     rule = DecisionRule(misspecified_factor=2.0)
     assert misspecification(7.0, 3.0, rule)["misspecified"]
     assert not misspecification(5.0, 3.0, rule)["misspecified"]

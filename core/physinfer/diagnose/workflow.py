@@ -401,7 +401,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         )
     self_gaps = [run["gap"] for run in calibration]
     self_gap = self_consistency_gap(self_gaps, settings.rule.calibration_summary)
-    scale = null_scale(gap0.floor_q95, self_gap)
+    scale = null_scale(gap0.floor, gap0.floor_q95, self_gap)
 
     # 4. Equal-budget control and one augmented model per effect, all warm-started.
     say(f"[3/5] control: the baseline refined {effect_steps} more trials from its fit")
