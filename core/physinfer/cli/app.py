@@ -34,6 +34,15 @@ app = typer.Typer(
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")]
 PluginOpt = Annotated[str, typer.Option("--plugin", "-p", help="Phenomenon to use (see `physinfer plugins`).")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the optimizer and of every simulation.")]
+SelectTopOpt = Annotated[
+    int,
+    typer.Option(
+        "--select-top",
+        help="Re-simulate the M best trials under --select-seeds fresh seeds and keep the one with the lowest "
+        "mean distance (0: the lowest logged distance; 4 suits chaotic phenomena such as the flag).",
+    ),
+]
+SelectSeedsOpt = Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")]
 
 
 @functools.cache
@@ -259,15 +268,8 @@ def refine_cmd(
             "--floor-samples", help="Re-simulate the best fit under this many seeds to report the noise floor (0: skip)."
         ),
     ] = 4,
-    select_top: Annotated[
-        int,
-        typer.Option(
-            "--select-top",
-            help="Re-simulate the best M trials under --select-seeds fresh seeds and report the one with the "
-            "lowest mean distance (0: the lowest logged distance).",
-        ),
-    ] = 0,
-    select_seeds: Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")] = 3,
+    select_top: SelectTopOpt = 0,
+    select_seeds: SelectSeedsOpt = 3,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""

@@ -15,6 +15,8 @@ from physinfer.cli.app import (
     JsonOpt,
     PluginOpt,
     SeedOpt,
+    SelectSeedsOpt,
+    SelectTopOpt,
     emit_json,
     err_console,
     handle_errors,
@@ -49,15 +51,8 @@ def diagnose_cmd(
     floor_samples: Annotated[
         int, typer.Option("--floor-samples", help="Re-simulations per gap measurement (>= 4).")
     ] = 6,
-    select_top: Annotated[
-        int,
-        typer.Option(
-            "--select-top",
-            help="Re-simulate each stage's best M trials under --select-seeds fresh seeds and keep the lowest "
-            "mean (0: the lowest logged distance; 4 suits chaotic phenomena such as the flag).",
-        ),
-    ] = 0,
-    select_seeds: Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")] = 3,
+    select_top: SelectTopOpt = 0,
+    select_seeds: SelectSeedsOpt = 3,
     calibrate: Annotated[
         bool,
         typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
