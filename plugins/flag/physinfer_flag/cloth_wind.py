@@ -28,6 +28,8 @@ from physinfer_flag import cloth_numba  # noqa: F401 - picks numba's cache direc
 WIND_SAMPLE_DT = 0.01
 #: Heights below this are treated as this in the shear law (no zero or negative powers).
 MIN_SHEAR_HEIGHT = 0.05
+#: Columns of a wind table: speed, yaw, shear exponent, inclination.
+WIND_COLUMNS = 4
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,16 @@ class WindSchedule:
     z_ref: float
     direction: float
 
+    def __post_init__(self) -> None:
+        # The compiled solver reads WIND_COLUMNS columns without bounds checks: a short
+        # table would be read past its end, so it is refused here.
+        table = np.asarray(self.table)
+        if table.ndim != 2 or table.shape[0] < 1 or table.shape[1] != WIND_COLUMNS:
+            raise ValueError(
+                f"a wind table must be (K, {WIND_COLUMNS}) [speed, yaw, shear exponent, inclination] "
+                f"with K >= 1, got shape {table.shape}"
+            )
+
     def scalars(self) -> np.ndarray:
         """``[dt, z_ref, direction]`` as float64, the solver's scalar wind inputs."""
         return np.array([self.dt, self.z_ref, self.direction], dtype=np.float64)
@@ -113,7 +125,7 @@ def sample_wind(
     return WindSchedule(dt=dt, table=table, z_ref=base.z_ref, direction=direction)
 
 
-def _row(state: WindState) -> tuple[float, float, float, float]:
+def _row(state: WindState) -> tuple[float, float, float, float]:  # WIND_COLUMNS values
     """One sample of the solver's wind table."""
     return (state.speed, state.yaw, state.shear_exponent, state.inclination)
 

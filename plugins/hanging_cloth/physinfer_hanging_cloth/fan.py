@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer_flag.cloth_wind import WIND_SAMPLE_DT, WindSchedule
+from physinfer_flag.cloth_wind import WIND_COLUMNS, WIND_SAMPLE_DT, WindSchedule
 
 #: Fan settings of the dataset, W1 (weakest) to W3.
 FAN_LEVELS: tuple[str, ...] = ("W1", "W2", "W3")
@@ -118,7 +118,7 @@ def fan_schedule(
     mean = settings.speed(level)
     times = np.arange(int(math.ceil(duration / WIND_SAMPLE_DT)) + 2) * WIND_SAMPLE_DT
     noise = turbulence(seed, times, settings)
-    table = np.zeros((times.size, 3))
+    table = np.zeros((times.size, WIND_COLUMNS))  # no shear, horizontal
     table[:, 0] = mean * np.maximum(1.0 + settings.gust_intensity * noise[0], 0.0)
     table[:, 1] = math.radians(settings.yaw_amplitude_deg) * noise[1]
     return WindSchedule(dt=WIND_SAMPLE_DT, table=table, z_ref=z_ref, direction=0.5 * math.pi)

@@ -9,7 +9,13 @@ import pytest
 
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.roles import Effect
-from physinfer_flag.cloth_wind import WindState, sample_wind, shear_factor, wind_at_time
+from physinfer_flag.cloth_wind import (
+    WindSchedule,
+    WindState,
+    sample_wind,
+    shear_factor,
+    wind_at_time,
+)
 
 
 class LinearRamp(Effect):
@@ -50,3 +56,9 @@ def test_shear_profile():
     assert shear_factor(5.0, 0.0, 2.0) == 1.0
     assert shear_factor(4.0, 0.5, 1.0) == pytest.approx(2.0)
     assert shear_factor(-1.0, 0.2, 2.0) == pytest.approx((0.05 / 2.0) ** 0.2)  # floored height
+
+
+def test_a_wind_table_of_another_width_is_refused():
+    # The compiled solver reads four columns without bounds checks.
+    with pytest.raises(ValueError, match=r"\(K, 4\)"):
+        WindSchedule(dt=0.01, table=np.zeros((5, 3)), z_ref=1.0, direction=0.0)

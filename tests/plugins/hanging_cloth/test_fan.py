@@ -60,11 +60,11 @@ def test_schedule_blows_along_plus_y_at_the_levels_mean_speed():
     for level, speed in zip(FAN_LEVELS, settings.speeds, strict=True):
         schedule = fan_schedule(settings, level=level, seed=1, duration=60.0, z_ref=1.0)
         assert schedule.direction == pytest.approx(math.pi / 2)
-        assert schedule.table.shape[1] == 3 and schedule.table.shape[0] * schedule.dt >= 60.0
+        assert schedule.table.shape[1] == 4 and schedule.table.shape[0] * schedule.dt >= 60.0
         assert schedule.table[:, 0].mean() == pytest.approx(speed, rel=0.05)
         assert (schedule.table[:, 0] >= 0).all()
         assert np.degrees(schedule.table[:, 1]).std() == pytest.approx(settings.yaw_amplitude_deg, rel=0.2)
-        assert (schedule.table[:, 2] == 0).all()
+        assert (schedule.table[:, 2:] == 0).all()  # no shear, horizontal
 
 
 def test_no_gusts_gives_a_steady_fan():
