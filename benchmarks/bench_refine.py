@@ -165,6 +165,8 @@ def main() -> None:
     parser.add_argument("--optimizers", default="ax,random,cma")
     parser.add_argument("--embedder", default=None, help="default: the phenomenon's")
     parser.add_argument("--weights", default=None, help="embedder weights (default: shipped)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds every simulation records, targets included (e.g. 4 for a 100-frame SDN)")
     parser.add_argument("--noise-samples", type=int, default=3)
     parser.add_argument("--seeds-per-trial", type=int, default=1)
     parser.add_argument("--floor-samples", type=int, default=4)
@@ -184,6 +186,10 @@ def main() -> None:
     registry, _ = load_registry()
     pipeline = build_pipeline(registry, args.plugin, embedder=args.embedder,
                               weights=Path(args.weights) if args.weights else None, fixed=args.fix)
+    if args.duration is not None:  # a phenomenon whose make_simulator takes duration_s
+        if args.fix:
+            raise SystemExit("--duration with --fix is not supported")
+        pipeline.simulator = pipeline.phenomenon.make_simulator((), duration_s=args.duration)
     args.embedder = args.embedder or pipeline.phenomenon.default_embedder
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -194,6 +200,8 @@ def main() -> None:
     if not args.select_top:
         del settings["select_top"], settings["select_seeds"]  # and rows from before --select-top
     del settings["reuse_trials"]  # how the trials were obtained does not change them
+    if args.duration is None:
+        del settings["duration"]  # rows from before --duration stay reusable
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):
