@@ -23,6 +23,12 @@ Usage::
 On a machine with more cores, run ``--shard 0/2`` and ``--shard 1/2`` (same ``--out``) as two
 processes; each prints the summary of every row logged so far. Wall times then include the
 other shard's load.
+
+Variants (each its own rows in ``results.jsonl``): ``--fix NAME=VALUE`` holds parameters;
+``--select-top M`` reports the best of the M best trials re-simulated under fresh seeds
+(``--reuse-trials`` continues finished runs in ``--out`` instead of re-running them);
+``--duration S`` makes every simulation, the targets' included, record S seconds (with
+``--weights`` of an SDN trained on clips that long).
 """
 
 from __future__ import annotations
