@@ -36,7 +36,7 @@ from physinfer_flag.cloth_kernels import (
     run_flag_batch,
 )
 from physinfer_flag.cloth_mesh import FlagMesh
-from physinfer_flag.cloth_wind import WindSchedule
+from physinfer_flag.cloth_wind import WIND_COLUMNS, WindSchedule
 from physinfer_flag.material import ClothMaterial
 
 _STATUS_TEXT = {
@@ -238,7 +238,7 @@ class ClothSolver:
         inv_mass = np.stack([self.inverse_mass(r.area_weight) for r in runs])
         curves = np.stack([self.hinge_curves(r.bending) for r in runs])
         n_wind = max(r.wind.table.shape[0] for r in runs)
-        wind = np.empty((batch, n_wind, runs[0].wind.table.shape[1]))
+        wind = np.empty((batch, n_wind, WIND_COLUMNS))
         for b, r in enumerate(runs):
             k = r.wind.table.shape[0]
             wind[b, :k] = r.wind.table

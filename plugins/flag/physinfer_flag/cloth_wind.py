@@ -116,7 +116,7 @@ def sample_wind(
         return WindSchedule(dt=dt, table=table, z_ref=base.z_ref, direction=direction)
     params = dict(params or {})
     n = int(math.ceil(duration / dt)) + 2
-    table = np.empty((n, len(_row(base))), dtype=np.float64)
+    table = np.empty((n, WIND_COLUMNS), dtype=np.float64)
     for k in range(n):
         state = replace(base)
         for effect in effects:
