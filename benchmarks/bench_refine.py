@@ -28,7 +28,9 @@ Variants (each its own rows in ``results.jsonl``): ``--fix NAME=VALUE`` holds pa
 ``--select-top M`` reports the best of the M best trials re-simulated under fresh seeds
 (``--reuse-trials`` continues finished runs in ``--out`` instead of re-running them);
 ``--duration S`` makes every simulation, the targets' included, record S seconds (with
-``--weights`` of an SDN trained on clips that long).
+``--weights`` of an SDN trained on clips that long); ``--batch-size Q`` proposes and
+simulates Q trials per optimizer step (``step_s`` then counts each trial's share of its
+batch's time).
 """
 
 from __future__ import annotations
@@ -83,6 +85,7 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         floor_samples=args.floor_samples,
         select_top=args.select_top,
         select_seeds=args.select_seeds,
+        batch_size=args.batch_size,
     )
     run_dir = RunDirectory(out)
     info = {"plugin": args.plugin, "optimizer": optimizer, "seed": 0, "effects": [], "embedder": args.embedder,
@@ -179,6 +182,8 @@ def main() -> None:
     parser.add_argument("--select-top", type=int, default=0,
                         help="report the best of the M best trials re-simulated under --select-seeds fresh seeds")
     parser.add_argument("--select-seeds", type=int, default=3)
+    parser.add_argument("--batch-size", type=int, default=1,
+                        help="trials per optimizer step, simulated as one batch (refine --batch-size)")
     parser.add_argument("--reuse-trials", action="store_true",
                         help="continue finished runs in --out instead of re-running them (e.g. to add --select-top)")
     parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
@@ -208,6 +213,8 @@ def main() -> None:
     del settings["reuse_trials"]  # how the trials were obtained does not change them
     if args.duration is None:
         del settings["duration"]  # rows from before --duration stay reusable
+    if args.batch_size == 1:
+        del settings["batch_size"]  # and rows from before --batch-size
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):

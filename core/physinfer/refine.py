@@ -6,6 +6,12 @@ parameters ζ, embed, and tell the optimizer the squared Euclidean distance. A
 simulation that raises, returns NaN or blows up is a failed trial and the run goes on.
 Every trial is appended to the run directory as it completes, so an interrupted run
 continues with ``resume=True``.
+
+With ``batch_size`` q > 1 each step asks the optimizer for q trials at once (Ax proposes
+them jointly, as a batch acquisition), simulates all of them in one call of
+:meth:`~physinfer.roles.Simulator.simulate_batch` (the flag runs a batch in parallel
+compiled threads), renders each and embeds them together. Same budget, fewer optimizer
+rounds, more of the machine busy per round.
 """
 
 from __future__ import annotations
@@ -21,8 +27,18 @@ import numpy as np
 
 from physinfer.errors import SimulationFailed, UserInputError
 from physinfer.io import atomic_write_json
-from physinfer.roles import Effect, Embedder, Optimizer, Phenomenon, Renderer, Simulator, Target
+from physinfer.roles import (
+    Effect,
+    Embedder,
+    Optimizer,
+    Phenomenon,
+    Renderer,
+    Simulator,
+    Target,
+    Trial,
+)
 from physinfer.rundir import RunDirectory, TrialRecord
+from physinfer.types import Trajectory
 
 #: run.json keys that must match for ``--resume``.
 RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed")
@@ -54,6 +70,8 @@ class RefineConfig:
             fresh distance as the best (0: the lowest logged distance; see
             :func:`select_best`).
         select_seeds: Fresh seeds per finalist of the selection.
+        batch_size: Trials proposed per optimizer step and simulated as one batch (q);
+            1 proposes, simulates and tells one trial at a time (the paper's loop).
     """
 
     steps: int = 40
@@ -66,6 +84,7 @@ class RefineConfig:
     log_objective: bool = True
     select_top: int = 0
     select_seeds: int = 3
+    batch_size: int = 1
 
     def objective(self, distance: float | None) -> float | None:
         """The value told to the optimizer for a distance (``None`` stays ``None``)."""
@@ -87,6 +106,8 @@ class RefineConfig:
             raise UserInputError(f"--select-top must be 0 or at least 2, got {self.select_top}")
         if self.select_seeds < 1:
             raise UserInputError(f"--select-seeds must be at least 1, got {self.select_seeds}")
+        if self.batch_size < 1:
+            raise UserInputError(f"--batch-size must be at least 1, got {self.batch_size}")
         if self.noise_sem is not None and not self.noise_sem >= 0:
             raise UserInputError(f"the noise standard error must be non-negative, got {self.noise_sem}")
 
@@ -152,6 +173,40 @@ def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sum((np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)) ** 2))
 
 
+NON_FINITE = "the simulation produced NaN or infinite positions"
+
+
+def simulate_one(simulator: Simulator, params: Mapping[str, float], seed: int) -> tuple[Trajectory | None, str | None]:
+    """One simulation as ``(trajectory, None)``, or ``(None, reason)`` when it fails.
+
+    Any exception of the simulator is a property of this θ (a blow-up, an unstable
+    setting), not a bug of the loop, so it becomes a failed trial.
+    """
+    try:
+        trajectory = simulator.simulate(params, seed=seed)
+    except Exception as exc:
+        return None, f"{type(exc).__name__}: {exc}"
+    if not trajectory.is_finite():
+        return None, NON_FINITE
+    return trajectory, None
+
+
+def simulate_many(
+    simulator: Simulator, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+) -> list[tuple[Trajectory | None, str | None]]:
+    """:func:`simulate_one` for ``B`` jobs, through the simulator's batched engine.
+
+    A batch call fails as a whole when one member fails; only then are the jobs simulated
+    one by one, to learn which failed and why (failures are rare, so the batch's speed is
+    kept in the common case).
+    """
+    try:
+        trajectories = simulator.simulate_batch(params, seeds=seeds)
+    except Exception:
+        return [simulate_one(simulator, p, s) for p, s in zip(params, seeds, strict=True)]
+    return [(t, None) if t.is_finite() else (None, NON_FINITE) for t in trajectories]
+
+
 def simulate_and_embed(
     pipeline: Pipeline,
     params: Mapping[str, float],
@@ -165,13 +220,10 @@ def simulate_and_embed(
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    try:
-        trajectory = pipeline.simulator.simulate(params, seed=seed)
-        if not trajectory.is_finite():
-            raise SimulationFailed("the simulation produced NaN or infinite positions")
-    except Exception as exc:  # any simulator failure is a property of this θ
+    trajectory, error = simulate_one(pipeline.simulator, params, seed)
+    if trajectory is None:
         timings["simulate"] = time.perf_counter() - t0
-        return None, f"{type(exc).__name__}: {exc}", timings
+        return None, error, timings
     t1 = time.perf_counter()
     clip = pipeline.renderer.render(trajectory, render_params)
     t2 = time.perf_counter()
@@ -214,6 +266,62 @@ def evaluate_mean(
             return None, error, totals
         distances.append(distance)
     return float(np.mean(distances)), None, totals
+
+
+def evaluate_batch(
+    pipeline: Pipeline,
+    params: Sequence[Mapping[str, float]],
+    target_embedding: np.ndarray,
+    render_params: Mapping[str, Any],
+    seeds: Sequence[int],
+) -> list[tuple[float | None, str | None, dict[str, float]]]:
+    """:func:`evaluate_mean` of ``q`` θ, simulated as one batch and embedded together.
+
+    Every θ is simulated under every seed in one :func:`simulate_many` call; the clips are
+    rendered one by one and embedded with ``embed_many``. A θ's timings are its share of
+    the batch's simulate and embed time plus its own render time. One θ alone takes the
+    sequential path (:func:`evaluate_mean`), so ``batch_size=1`` runs exactly as before.
+
+    Returns:
+        One ``(distance, error, timings)`` per θ, in order.
+    """
+    if len(params) == 1:
+        return [evaluate_mean(pipeline, params[0], target_embedding, render_params, seeds)]
+    jobs = [(i, seed) for i in range(len(params)) for seed in seeds]
+    t0 = time.perf_counter()
+    simulated = simulate_many(pipeline.simulator, [params[i] for i, _ in jobs], [seed for _, seed in jobs])
+    simulate_s = (time.perf_counter() - t0) / len(jobs)
+    timings = [{"simulate": simulate_s * len(seeds), "render": 0.0, "embed": 0.0} for _ in params]
+    errors: list[str | None] = [None] * len(params)
+    clips, owners = [], []
+    for (i, _), (trajectory, error) in zip(jobs, simulated, strict=True):
+        if errors[i] is not None:
+            continue
+        if trajectory is None:
+            errors[i] = error  # failed if any seed fails, as evaluate_mean
+            continue
+        t1 = time.perf_counter()
+        clips.append(pipeline.renderer.render(trajectory, render_params))
+        timings[i]["render"] += time.perf_counter() - t1
+        owners.append(i)
+    t2 = time.perf_counter()
+    embeddings = np.asarray(pipeline.embedder.embed_many(clips)) if clips else np.empty((0, 0))
+    embed_s = (time.perf_counter() - t2) / max(len(clips), 1)
+    distances: list[list[float]] = [[] for _ in params]
+    for i, embedding in zip(owners, embeddings, strict=True):
+        timings[i]["embed"] += embed_s
+        distances[i].append(squared_distance(embedding, target_embedding))
+    results = []
+    for i in range(len(params)):
+        if errors[i] is not None:
+            results.append((None, errors[i], timings[i]))
+            continue
+        distance = float(np.mean(distances[i]))
+        if not np.isfinite(distance):
+            results.append((None, "the embedding distance is not finite", timings[i]))
+        else:
+            results.append((distance, None, timings[i]))
+    return results
 
 
 def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:
@@ -272,6 +380,20 @@ def observation_noise(
     sem = float(spread / np.sqrt(config.seeds_per_trial)) if np.isfinite(spread) and spread > 1e-9 else None
     atomic_write_json(path, {"sem": sem, "at": "centre", "log_objective": config.log_objective, **floor.summary()})
     return sem
+
+
+def next_trials(optimizer: Optimizer, step: int, n: int, dim: int) -> list[Trial]:
+    """The next ``n`` trials: the centre first (attached, at step 0), then the optimizer's.
+
+    An optimizer may propose fewer than asked (Ax holds back while its initial design
+    awaits data); the loop then runs a smaller batch. It must propose at least one.
+    """
+    trials = [optimizer.attach(np.zeros(dim))] if step == 0 else []
+    if n > len(trials):
+        trials += optimizer.ask(n - len(trials))[: n - len(trials)]
+    if not trials:
+        raise RuntimeError(f"optimizer {type(optimizer).__name__} proposed no trial at step {step}")
+    return trials
 
 
 def run_refinement(
@@ -336,31 +458,34 @@ def _run_refinement(
     seeds = config.trial_seeds()
     best = min((r.distance for r in records if r.distance is not None), default=float("inf"))
 
-    for step in range(len(records), config.steps):
+    while len(records) < config.steps:
+        step = len(records)
         t0 = time.perf_counter()
-        trial = optimizer.attach(np.zeros(len(space))) if step == 0 else optimizer.ask(1)[0]
+        trials = next_trials(optimizer, step, min(config.batch_size, config.steps - step), len(space))
         t_ask = time.perf_counter() - t0
-        params = space.from_unit(trial.x)
-        distance, error, timings = evaluate_mean(pipeline, params, target_embedding, target.render_params, seeds)
+        params = [space.from_unit(trial.x) for trial in trials]
+        outcomes = evaluate_batch(pipeline, params, target_embedding, target.render_params, seeds)
         t1 = time.perf_counter()
-        optimizer.tell(trial.index, config.objective(distance), sem if distance is not None else None)
-        timings["optimizer"] = t_ask + time.perf_counter() - t1
-        record = TrialRecord(
-            step=step,
-            index=trial.index,
-            x=[float(v) for v in trial.x],
-            params=params,
-            distance=distance,
-            status="ok" if distance is not None else "failed",
-            error=error,
-            timings=timings,
-        )
-        run_dir.append_trial(record)
-        records.append(record)
-        if distance is not None:
-            best = min(best, distance)
-        if on_trial is not None:
-            on_trial(record, best)
+        for trial, (distance, _, _) in zip(trials, outcomes, strict=True):
+            optimizer.tell(trial.index, config.objective(distance), sem if distance is not None else None)
+        optimizer_s = (t_ask + time.perf_counter() - t1) / len(trials)
+        for offset, (trial, theta, (distance, error, timings)) in enumerate(zip(trials, params, outcomes, strict=True)):
+            record = TrialRecord(
+                step=step + offset,
+                index=trial.index,
+                x=[float(v) for v in trial.x],
+                params=theta,
+                distance=distance,
+                status="ok" if distance is not None else "failed",
+                error=error,
+                timings={**timings, "optimizer": optimizer_s},
+            )
+            run_dir.append_trial(record)
+            records.append(record)
+            if distance is not None:
+                best = min(best, distance)
+            if on_trial is not None:
+                on_trial(record, best)
     selection = None
     if config.select_top:
         selection = select_best(records, pipeline, target, target_embedding, run_dir, config)

@@ -113,6 +113,7 @@ def refine(
     floor_samples: int = 4,
     select_top: int = 0,
     select_seeds: int = 3,
+    batch_size: int = 1,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
@@ -143,6 +144,7 @@ def refine(
         floor_samples=floor_samples,
         select_top=select_top,
         select_seeds=select_seeds,
+        batch_size=batch_size,
     )
     config.validate()
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {})
@@ -164,6 +166,7 @@ def refine(
         "truth": target.truth,
         "overwrite": overwrite,
         "seeds_per_trial": seeds_per_trial,
+        "batch_size": batch_size,  # informative: a resumed run may use another q
     }
     if fixed_values:  # absent when nothing is fixed, so runs from before --fix still resume
         run_info["fixed"] = fixed_values

@@ -121,3 +121,69 @@ def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, monkeypat
     assert failed and all("blew up" in t.error for t in failed)
     assert result.n_failed == len(failed) and result.n_trials == 6
     assert np.isfinite(result.best_distance)
+
+
+def test_batches_propose_simulate_and_log_like_single_trials(tmp_path, monkeypatch):
+    """Random search draws per trial index, so q = 3 must log what q = 1 logs, trial for trial."""
+    from pendulum_example import physics
+
+    registry, _ = load_registry()
+    single = refine(registry, plugin="pendulum", steps=7, optimizer="random", out=tmp_path / "q1", progress=False)
+    calls = []
+    real = physics.PendulumSimulator.simulate_batch
+
+    def counting(self, params, *, seeds):
+        calls.append(len(params))
+        return real(self, params, seeds=seeds)
+
+    monkeypatch.setattr(physics.PendulumSimulator, "simulate_batch", counting)
+    batched = refine(
+        registry, plugin="pendulum", steps=7, optimizer="random", out=tmp_path / "q3", progress=False, batch_size=3
+    )
+    assert calls == [3, 3], "two full batches (steps 0-2, 3-5); the last lone trial takes the single path"
+    assert [t.step for t in batched.trials] == list(range(7))
+    assert [t.x for t in batched.trials] == [t.x for t in single.trials]
+    assert [t.distance for t in batched.trials] == pytest.approx([t.distance for t in single.trials], rel=1e-9)
+    assert batched.trials[0].x == [0.0, 0.0, 0.0], "the first trial is still the centre"
+    assert all(t.timings["simulate"] > 0 and "optimizer" in t.timings for t in batched.trials)
+    assert json.loads((tmp_path / "q3" / "run.json").read_text())["batch_size"] == 3
+
+
+def test_ax_proposes_batches_through_the_cli_and_resumes_with_another_size(tmp_path):
+    out = tmp_path / "run"
+    data = cli("refine", "--plugin", "pendulum", "--steps", "9", "--batch-size", "4", "--floor-samples", "0",
+               "--out", str(out), "--json")
+    trials = RunDirectory(out).read_trials()
+    assert data["n_trials"] == 9 and [t.step for t in trials] == list(range(9))
+    assert len({t.index for t in trials}) == 9 and len({tuple(t.x) for t in trials}) == 9
+    resumed = cli("refine", "--plugin", "pendulum", "--steps", "11", "--batch-size", "2", "--floor-samples", "0",
+                  "--out", str(out), "--resume", "--json")
+    after = RunDirectory(out).read_trials()
+    assert resumed["n_trials"] == 11 and [t.x for t in after[:9]] == [t.x for t in trials]
+
+
+def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, monkeypatch):
+    from pendulum_example import physics
+
+    real = physics.PendulumSimulator.simulate
+
+    def flaky(self, params, *, seed=0):
+        if params["length"] > 1.0:
+            raise physics.SimulationFailed("blew up (test)")
+        return real(self, params, seed=seed)
+
+    monkeypatch.setattr(physics.PendulumSimulator, "simulate", flaky)
+    registry, _ = load_registry()
+    result = refine(registry, plugin="pendulum", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
+                    progress=False, batch_size=4, seeds_per_trial=2)
+    long = [t for t in result.trials if t.params["length"] > 1.0]
+    short = [t for t in result.trials if t.params["length"] <= 1.0]
+    assert long and short, "seed 3 draws both kinds"
+    assert all(t.status == "failed" and "blew up" in t.error for t in long)
+    assert all(t.status == "ok" and np.isfinite(t.distance) for t in short)
+
+
+def test_batch_size_must_be_positive(tmp_path):
+    registry, _ = load_registry()
+    with pytest.raises(UserInputError, match="--batch-size must be at least 1, got 0"):
+        refine(registry, plugin="pendulum", steps=3, out=tmp_path / "r", progress=False, batch_size=0)

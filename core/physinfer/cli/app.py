@@ -270,6 +270,14 @@ def refine_cmd(
     ] = 4,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
+    batch_size: Annotated[
+        int,
+        typer.Option(
+            "--batch-size",
+            help="Trials proposed per optimizer step and simulated as one batch (q); the flag simulates "
+            "a batch in parallel threads. Same --steps budget, fewer optimizer rounds.",
+        ),
+    ] = 1,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -305,6 +313,7 @@ def refine_cmd(
         floor_samples=floor_samples,
         select_top=select_top,
         select_seeds=select_seeds,
+        batch_size=batch_size,
     )
     summary = result.summary()
     if as_json:

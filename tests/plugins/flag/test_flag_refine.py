@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from physinfer.rundir import RunDirectory
 from physinfer.types import Clip
@@ -56,3 +57,16 @@ def test_colour_640x360_30fps_target_with_truth(tmp_path):
                "--steps", "2", "--out", str(tmp_path / "run"), *FAST)
     assert set(data["abs_errors"]) == {"wind_speed"}
     assert data["ground_truth"] == {"wind_speed": 6.5}
+
+
+def test_a_batch_of_flags_gives_the_distances_of_single_trials(tmp_path):
+    """q = 2 goes through the numba batch solver and embed_many; the distances are the sequential ones."""
+    from physinfer.plugins import load_registry
+    from physinfer.session import refine
+
+    registry, _ = load_registry()
+    quick = dict(plugin="flag", steps=3, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
+    single = refine(registry, out=tmp_path / "q1", **quick)
+    batched = refine(registry, out=tmp_path / "q2", batch_size=2, **quick)
+    assert [t.x for t in batched.trials] == [t.x for t in single.trials]
+    assert [t.distance for t in batched.trials] == pytest.approx([t.distance for t in single.trials], rel=1e-4)
