@@ -136,20 +136,23 @@ def measure_noise_floor(
         ValueError: for fewer than two seeds or a ζ list of the wrong length.
         SimulationFailed: when fewer than two re-simulations succeed.
     """
-    from physinfer.refine import simulate_and_embed, squared_distance
+    from physinfer.refine import simulate_many, squared_distance
 
     if len(seeds) < 2:
         raise ValueError(f"a noise floor needs at least two seeds, got {len(seeds)}")
     zetas = [render_params] * len(seeds) if isinstance(render_params, Mapping) else list(render_params)
     if len(zetas) != len(seeds):
         raise ValueError(f"{len(zetas)} render-parameter sets for {len(seeds)} seeds")
+    # One batch call (the flag simulates it in parallel threads); each clip is embedded on
+    # its own, so the floor is bit for bit what one-at-a-time evaluation measures.
+    simulated = simulate_many(pipeline.simulator, [params] * len(seeds), [int(s) for s in seeds])
     embeddings, used, failed = [], [], 0
-    for seed, zeta in zip(seeds, zetas, strict=True):
-        embedding, _, _ = simulate_and_embed(pipeline, params, zeta, int(seed))
-        if embedding is None:  # a failed re-simulation is a property of θ and this seed
+    for seed, zeta, (trajectory, _) in zip(seeds, zetas, simulated, strict=True):
+        if trajectory is None:  # a failed re-simulation is a property of θ and this seed
             failed += 1
             continue
-        embeddings.append(embedding)
+        clip = pipeline.renderer.render(trajectory, zeta)
+        embeddings.append(np.asarray(pipeline.embedder.embed(clip)))
         used.append(int(seed))
     if len(embeddings) < 2:
         raise SimulationFailed(f"only {len(embeddings)} of {len(seeds)} re-simulations succeeded")

@@ -68,6 +68,29 @@ def test_floor_grows_with_the_seed_noise_and_gap_with_the_offset():
     assert summary["ratio"] > 10 and json.dumps(summary)
 
 
+def test_the_floor_is_simulated_as_one_batch_and_counts_failed_seeds():
+    class Batched(NoisySimulator):
+        calls: list = []
+
+        def simulate_batch(self, params, *, seeds):
+            self.calls.append(list(seeds))
+            if 13 in seeds:
+                raise RuntimeError("one member blew up")
+            return super().simulate_batch(params, seeds=seeds)
+
+        def simulate(self, params, *, seed=0):
+            if seed == 13:
+                raise RuntimeError("blew up")
+            return super().simulate(params, seed=seed)
+
+    batched = Pipeline(phenomenon=None, simulator=Batched(0.1), renderer=PassRenderer(), embedder=MeanEmbedder())
+    seeds = noise_seeds(0, 5)
+    floor = measure_noise_floor(batched, {"a": 1.0}, {}, seeds=seeds)
+    assert Batched.calls == [seeds], "one batch call for all seeds"
+    assert floor.pairwise == measure_noise_floor(pipeline(0.1), {"a": 1.0}, {}, seeds=seeds).pairwise
+    failing = measure_noise_floor(batched, {"a": 1.0}, {}, seeds=[11, 12, 13])
+    assert failing.n_failed == 1 and failing.seeds == [11, 12], "the failing seed alone is dropped"
+
 def test_noise_floor_needs_two_seeds():
     with pytest.raises(ValueError, match="two seeds"):
         measure_noise_floor(pipeline(0.1), {"a": 1.0}, {}, seeds=[1])
