@@ -73,6 +73,10 @@ class FixedParameters:
     def simulate(self, params: Any, *, seed: int = 0) -> Any:
         return self.inner.simulate({**self.fixed, **params}, seed=seed)
 
+    def simulate_batch(self, params: Any, *, seeds: Any) -> Any:
+        # The flag's batch engine (noise floors simulate their seeds as one batch).
+        return self.inner.simulate_batch([{**self.fixed, **p} for p in params], seeds=seeds)
+
 
 def flag_lite(**config: Any) -> Any:
     """The flag phenomenon on a coarse grid with the bending held at 1× (still named ``flag``)."""
