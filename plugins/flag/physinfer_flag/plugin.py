@@ -18,6 +18,11 @@ def physinfer_register_embedders(registry):
     registry.add_embedder(
         "spectral", "physinfer_flag.sdn.embedder:SpectralEmbedder", "SDN front end + pooling (parameter-free, torch)"
     )
+    registry.add_embedder(
+        "spectral_shape",
+        "physinfer_flag.sdn.embedder:SpectralShapeEmbedder",
+        "spectral + the clip's mean image (motion and mean pose; for diagnosing wind direction)",
+    )
 
 
 @hookimpl

@@ -88,3 +88,26 @@ def test_spectral_embedder_defaults_and_refuses_weights():
         SpectralEmbedder(model="some.safetensors")
     with pytest.raises(UserInputError, match="grid"):
         SpectralEmbedder(config=SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=40))
+
+
+def test_spectral_shape_appends_the_weighted_mean_image_to_the_spectral_features():
+    config = SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=4, shape_grid=2, shape_weight=10.0)
+    shaped = SpectralEmbedder(config=config, device="cpu")
+    plain = SpectralEmbedder(config=SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=4), device="cpu")
+    assert shaped.dim == 4 * 16 + 4
+    clip = grating_clip(size=(32, 32), fps=25.0)
+    clip.frames[:, :, :16] = 0  # the left half dark all the time: the mean shape sees it
+    features = check_embedder(shaped, clip)
+    np.testing.assert_allclose(features[:64], plain.embed(clip), rtol=1e-6)
+    left, right = features[64:].reshape(2, 2).T
+    assert np.all(left == 0) and np.all(right > 2.0), "cells of the mean image, times the weight"
+
+
+def test_spectral_shape_embedder_is_registered_with_a_16x16_mean_image():
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    embedder = registry.embedder("spectral_shape", model=None, device="cpu")
+    assert embedder.dim == 196 + 256 and embedder.config.shape_grid == 16
+    with pytest.raises(UserInputError, match="shape_grid"):
+        SpectralEmbedder(config=SpectralEmbedderConfig(frontend=SMALL_FRONT, shape_grid=64))

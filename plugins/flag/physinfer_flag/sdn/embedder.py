@@ -110,11 +110,19 @@ class SpectralEmbedderConfig:
         frontend: The fixed front end (the SDN's defaults).
         grid: Cells per side of the spatial pooling grid.
         power_floor: Added to mean powers before the log.
+        shape_grid: Cells per side of the clip's time-averaged image appended to the
+            spectral features (0: none). The spectral maps keep the motion and drop the
+            mean shape; a steady change of the flag's pose (a yawed or tilted wind) shows
+            mostly there.
+        shape_weight: Scale of the mean image's cells (gray levels in [0, 1]) against the
+            spectral features.
     """
 
     frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
     grid: int = 7
     power_floor: float = 1e-6
+    shape_grid: int = 0
+    shape_weight: float = 30.0
 
     def validate(self) -> None:
         """Raise :class:`ValueError` on inconsistent settings."""
@@ -125,6 +133,10 @@ class SpectralEmbedderConfig:
             )
         if self.power_floor <= 0:
             raise ValueError("power_floor must be positive")
+        if not 0 <= self.shape_grid <= self.frontend.size:
+            raise ValueError(f"shape_grid must be between 0 and {self.frontend.size}, got {self.shape_grid}")
+        if self.shape_weight <= 0:
+            raise ValueError("shape_weight must be positive")
 
 
 class SpectralEmbedder(Embedder):
@@ -166,10 +178,10 @@ class SpectralEmbedder(Embedder):
         self.pooling = SpectralPooling(
             frontend=c, grid=self.config.grid, power_floor=self.config.power_floor
         )
-        self.dim = self.pooling.out_dim
+        self.dim = self.pooling.out_dim + self.config.shape_grid**2
 
     def embed(self, clip: Clip) -> np.ndarray:
-        """Embed one clip; returns ``(4k · grid²,)`` float32.
+        """Embed one clip; returns ``(4k · grid² + shape_grid²,)`` float32.
 
         Raises:
             UserInputError: when the clip is shorter than ``n_frames`` at ``fps``.
@@ -178,11 +190,42 @@ class SpectralEmbedder(Embedder):
 
     @torch.inference_mode()
     def embed_many(self, clips: Sequence[Clip]) -> np.ndarray:
-        """Embed several clips; returns ``(N, 4k · grid²)`` float32."""
+        """Embed several clips; returns ``(N, 4k · grid² + shape_grid²)`` float32."""
         out = np.empty((len(clips), self.dim), dtype=np.float32)
         for start in range(0, len(clips), 8):
             batch = _prepared_batch(clips[start : start + 8], self.config.frontend, self.device)
-            out[start : start + len(batch)] = (
-                self.pooling(self.frontend(batch)).float().cpu().numpy()
-            )
+            features = self.pooling(self.frontend(batch))
+            if self.config.shape_grid:
+                features = torch.cat([features, self._mean_shape(batch)], dim=1)
+            out[start : start + len(batch)] = features.float().cpu().numpy()
         return out
+
+    def _mean_shape(self, videos: torch.Tensor) -> torch.Tensor:
+        """``(B, T, S, S)`` gray videos → ``(B, shape_grid²)`` weighted cells of their mean image."""
+        mean = videos.mean(dim=1, keepdim=True)  # (B, 1, S, S)
+        cells = torch.nn.functional.adaptive_avg_pool2d(mean, self.config.shape_grid)
+        return cells.flatten(1) * self.config.shape_weight
+
+
+class SpectralShapeEmbedder(SpectralEmbedder):
+    """:class:`SpectralEmbedder` plus the mean image on a 16 × 16 grid: motion and mean shape.
+
+    For diagnosing a flag: a wind that turns or tilts the flag moves its mean pose far more
+    than its flapping spectrum. The weight (30 per unit gray level) puts the mean image's
+    seed-to-seed spread below the spectral features' on the flag at 6 m/s
+    (docs/benchmarks.md, effect visibility), so neither block drowns the other.
+
+    Args:
+        config: Settings (default: ``SpectralEmbedderConfig(shape_grid=16)``).
+        model: Must be ``None``.
+        device: Torch device.
+    """
+
+    def __init__(
+        self,
+        *,
+        config: SpectralEmbedderConfig | None = None,
+        model: str | Path | None = None,
+        device: str | None = None,
+    ) -> None:
+        super().__init__(config=config or SpectralEmbedderConfig(shape_grid=16), model=model, device=device)
