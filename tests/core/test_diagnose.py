@@ -115,6 +115,8 @@ def test_calibration_runs_must_be_positive(tmp_path: Path):
         DiagnoseSettings(plugin="pendulum", out=tmp_path, calibration_runs=0).validate()
     with pytest.raises(UserInputError, match="--select-top must be 0 or at least 2"):
         DiagnoseSettings(plugin="pendulum", out=tmp_path, select_top=1).validate()
+    with pytest.raises(UserInputError, match="--batch-size must be at least 1"):
+        DiagnoseSettings(plugin="pendulum", out=tmp_path, batch_size=0).validate()
 
 
 def test_null_scale_and_misspecification():
@@ -344,3 +346,23 @@ def test_no_effect_is_not_misspecified(tmp_path: Path):
     report = _diagnose(tmp_path, _pendulum_target(tmp_path, None), steps=16, optimizer="ax")
     assert not report["misspecified"]
     assert report["named_effect"] is None
+
+
+def test_every_stage_proposes_its_trials_in_batches(tmp_path: Path, monkeypatch):
+    from pendulum_example import physics
+
+    sizes = []
+    real = physics.PendulumSimulator.simulate_batch
+
+    def counting(self, params, *, seeds):
+        sizes.append(len(params))
+        return real(self, params, seeds=seeds)
+
+    monkeypatch.setattr(physics.PendulumSimulator, "simulate_batch", counting)
+    report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=5, optimizer="random",
+                       batch_size=2, calibration_runs=1, calibration_control=False)
+    assert report["settings"]["batch_size"] == 2
+    # Per stage of 5 trials: batches of 2, 2 and a lone trial; the floors' batches hold 4 seeds.
+    assert sizes.count(2) >= 2 * 3, sizes
+    trials = (tmp_path / "diag-quadratic_drag" / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()
+    assert len(trials) == 5

@@ -43,6 +43,14 @@ SelectTopOpt = Annotated[
     ),
 ]
 SelectSeedsOpt = Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")]
+BatchSizeOpt = Annotated[
+    int,
+    typer.Option(
+        "--batch-size",
+        help="Trials proposed per optimizer step and simulated as one batch (q); the flag simulates "
+        "a batch in parallel threads. Same --steps budget, fewer optimizer rounds.",
+    ),
+]
 
 
 @functools.cache
@@ -270,14 +278,7 @@ def refine_cmd(
     ] = 4,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
-    batch_size: Annotated[
-        int,
-        typer.Option(
-            "--batch-size",
-            help="Trials proposed per optimizer step and simulated as one batch (q); the flag simulates "
-            "a batch in parallel threads. Same --steps budget, fewer optimizer rounds.",
-        ),
-    ] = 1,
+    batch_size: BatchSizeOpt = 1,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""

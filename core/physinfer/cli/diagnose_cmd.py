@@ -12,6 +12,7 @@ from typing import Annotated
 import typer
 
 from physinfer.cli.app import (
+    BatchSizeOpt,
     JsonOpt,
     PluginOpt,
     SeedOpt,
@@ -53,6 +54,7 @@ def diagnose_cmd(
     ] = 6,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
+    batch_size: BatchSizeOpt = 1,
     calibrate: Annotated[
         bool,
         typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
@@ -115,6 +117,7 @@ def diagnose_cmd(
         floor_samples=floor_samples,
         select_top=select_top,
         select_seeds=select_seeds,
+        batch_size=batch_size,
         calibrate=calibrate,
         calibration_runs=calibration_runs,
         calibration_control=calibration_control,

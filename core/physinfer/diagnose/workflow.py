@@ -76,6 +76,8 @@ class DiagnoseSettings:
             :func:`physinfer.refine.select_best`). For chaotic phenomena it keeps the
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
+        batch_size: Trials per optimizer step of every stage, simulated as one batch (see
+            :class:`physinfer.refine.RefineConfig`).
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
             (the maximum by default) makes their gaps one (see :mod:`physinfer.diagnose.decide`).
@@ -106,6 +108,7 @@ class DiagnoseSettings:
     floor_samples: int = 6
     select_top: int = 0
     select_seeds: int = 3
+    batch_size: int = 1
     calibrate: bool = True
     calibration_runs: int = 3
     calibration_control: bool = True
@@ -122,7 +125,7 @@ class DiagnoseSettings:
             raise UserInputError(
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
             )
-        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds).validate()
+        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=self.batch_size).validate()
         if self.calibration_runs < 1:
             raise UserInputError(
                 f"--calibration-runs must be at least 1, got {self.calibration_runs} "
@@ -199,7 +202,7 @@ def run_stage(
     }
     config = RefineConfig(
         steps=steps, optimizer=settings.optimizer, seed=seed,
-        select_top=settings.select_top, select_seeds=settings.select_seeds,
+        select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
     )
     resume = run_dir.run_file.is_file()
     return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
@@ -591,6 +594,7 @@ def _outputs(
             "floor_samples": settings.floor_samples,
             "select_top": settings.select_top,
             "select_seeds": settings.select_seeds,
+            "batch_size": settings.batch_size,
             "calibrate": settings.calibrate,
             "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
             "calibration_control": settings.calibrate and settings.calibration_control,
