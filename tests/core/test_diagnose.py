@@ -348,21 +348,11 @@ def test_no_effect_is_not_misspecified(tmp_path: Path):
     assert report["named_effect"] is None
 
 
-def test_every_stage_proposes_its_trials_in_batches(tmp_path: Path, monkeypatch):
-    from pendulum_example import physics
-
-    sizes = []
-    real = physics.PendulumSimulator.simulate_batch
-
-    def counting(self, params, *, seeds):
-        sizes.append(len(params))
-        return real(self, params, seeds=seeds)
-
-    monkeypatch.setattr(physics.PendulumSimulator, "simulate_batch", counting)
+def test_every_stage_proposes_its_trials_in_batches(tmp_path: Path, pendulum_batch_sizes):
     report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=5, optimizer="random",
                        batch_size=2, calibration_runs=1, calibration_control=False)
     assert report["settings"]["batch_size"] == 2
     # Per stage of 5 trials: batches of 2, 2 and a lone trial; the floors' batches hold 4 seeds.
-    assert sizes.count(2) >= 2 * 3, sizes
+    assert pendulum_batch_sizes.count(2) >= 2 * 3, pendulum_batch_sizes
     trials = (tmp_path / "diag-quadratic_drag" / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()
     assert len(trials) == 5

@@ -104,17 +104,7 @@ def test_resume_refuses_a_run_of_another_plugin(tmp_path):
         refine(registry, plugin="pendulum", steps=2, out=out, resume=True, progress=False)
 
 
-def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
-    from pendulum_example import physics
-
-    real = physics.PendulumSimulator.simulate
-
-    def flaky(self, params, *, seed=0):
-        if params["length"] > 1.0:
-            raise physics.SimulationFailed("blew up (test)")
-        return real(self, params, seed=seed)
-
-    monkeypatch.setattr(physics.PendulumSimulator, "simulate", flaky)
+def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, long_pendulums_blow_up):
     registry, _ = load_registry()
     result = refine(registry, plugin="pendulum", steps=6, optimizer="random", seed=3, out=tmp_path / "r", progress=False)
     failed = [t for t in result.trials if t.status == "failed"]
@@ -123,24 +113,14 @@ def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, monkeypat
     assert np.isfinite(result.best_distance)
 
 
-def test_batches_propose_simulate_and_log_like_single_trials(tmp_path, monkeypatch):
+def test_batches_propose_simulate_and_log_like_single_trials(tmp_path, pendulum_batch_sizes):
     """Random search draws per trial index, so q = 3 must log what q = 1 logs, trial for trial."""
-    from pendulum_example import physics
-
     registry, _ = load_registry()
-    single = refine(registry, plugin="pendulum", steps=7, optimizer="random", out=tmp_path / "q1", progress=False)
-    calls = []
-    real = physics.PendulumSimulator.simulate_batch
-
-    def counting(self, params, *, seeds):
-        calls.append(len(params))
-        return real(self, params, seeds=seeds)
-
-    monkeypatch.setattr(physics.PendulumSimulator, "simulate_batch", counting)
-    batched = refine(
-        registry, plugin="pendulum", steps=7, optimizer="random", out=tmp_path / "q3", progress=False, batch_size=3
-    )
-    assert calls == [3, 3], "two full batches (steps 0-2, 3-5); the last lone trial takes the single path"
+    quick = dict(plugin="pendulum", steps=7, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
+    single = refine(registry, out=tmp_path / "q1", **quick)
+    assert pendulum_batch_sizes == []
+    batched = refine(registry, out=tmp_path / "q3", batch_size=3, **quick)
+    assert pendulum_batch_sizes == [3, 3], "two full batches (steps 0-2, 3-5); the last lone trial takes the single path"
     assert [t.step for t in batched.trials] == list(range(7))
     assert [t.x for t in batched.trials] == [t.x for t in single.trials]
     assert [t.distance for t in batched.trials] == pytest.approx([t.distance for t in single.trials], rel=1e-9)
@@ -162,22 +142,12 @@ def test_ax_proposes_batches_through_the_cli_and_resumes_with_another_size(tmp_p
     assert resumed["n_trials"] == 11 and [t.x for t in after[:9]] == [t.x for t in trials]
 
 
-def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, monkeypatch):
-    from pendulum_example import physics
-
-    real = physics.PendulumSimulator.simulate
-
-    def flaky(self, params, *, seed=0):
-        if params["length"] > 1.0:
-            raise physics.SimulationFailed("blew up (test)")
-        return real(self, params, seed=seed)
-
-    monkeypatch.setattr(physics.PendulumSimulator, "simulate", flaky)
+def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, long_pendulums_blow_up):
     registry, _ = load_registry()
     result = refine(registry, plugin="pendulum", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
                     progress=False, batch_size=4, seeds_per_trial=2)
-    long = [t for t in result.trials if t.params["length"] > 1.0]
-    short = [t for t in result.trials if t.params["length"] <= 1.0]
+    long = [t for t in result.trials if t.params["length"] > 1.3]
+    short = [t for t in result.trials if t.params["length"] <= 1.3]
     assert long and short, "seed 3 draws both kinds"
     assert all(t.status == "failed" and "blew up" in t.error for t in long)
     assert all(t.status == "ok" and np.isfinite(t.distance) for t in short)
