@@ -53,6 +53,16 @@ def test_ax_falls_back_to_a_seeded_random_point_when_the_gp_cannot_be_fitted(mon
         points.append(trial.x)
     assert np.array_equal(points[0], points[1]), "the fallback draw is seeded"
 
+    from botorch.exceptions.errors import OptimizationGradientError
+
+    def nan_gradients(**_):
+        raise OptimizationGradientError("119 elements of the gradient array are NaN", current_x=np.zeros(3))
+
+    opt = AxOptimizer(dim=3, seed=4)
+    monkeypatch.setattr(opt._client, "get_next_trials", nan_gradients)
+    batch = opt.ask(4)
+    assert opt.fallbacks == 4 and len({tuple(t.x) for t in batch}) == 4, "a batch falls back to distinct draws"
+
     def other(**_):
         raise RuntimeError("a real bug")
 

@@ -41,9 +41,11 @@ class _DropDuplicateFallback(logging.Filter):
         return "MAX_GEN_ATTEMPTS" not in record.getMessage()
 
 
-#: Exceptions of a failed GP fit (BoTorch, GPyTorch, linear_operator), matched by name so
-#: that importing this module does not import them.
-_FIT_FAILURES = frozenset({"ModelFittingError", "NotPSDError", "NanError"})
+#: Exceptions of a failed GP fit or acquisition optimisation (BoTorch, GPyTorch,
+#: linear_operator), matched by name so that importing this module does not import them.
+#: ``OptimizationGradientError`` (NaN acquisition gradients) was seen on a flag target with
+#: ``--batch-size 4`` after 32 trials.
+_GP_FAILURES = frozenset({"ModelFittingError", "NotPSDError", "NanError", "OptimizationGradientError"})
 
 
 class AxOptimizer(Optimizer):
@@ -114,17 +116,19 @@ class AxOptimizer(Optimizer):
         return {n: float(np.clip(v, -1.0, 1.0)) for n, v in zip(self.names, x, strict=True)}
 
     def ask(self, n: int = 1) -> list[Trial]:
-        """Ax's next ``n`` trials; a random point where the GP cannot be fitted.
+        """Ax's next ``n`` trials; random points where the GP cannot be fitted or its
+        acquisition cannot be optimised.
 
         BoTorch gives up fitting the GP now and then (seen on a chaotic flag target after
-        30 trials with a measured observation noise); one unfit step should not end a
-        run of many minutes, so that step falls back to a uniform draw, seeded by
-        (seed, trial count) so a resumed run draws the same, and ``fallbacks`` counts it.
+        30 trials with a measured observation noise), and a joint batch acquisition can hit
+        NaN gradients; one such step should not end a run of many minutes, so it falls back
+        to uniform draws, each seeded by (seed, trial count) so a resumed run draws the
+        same, and ``fallbacks`` counts them.
         """
         try:
             proposals = self._client.get_next_trials(max_trials=n)
         except Exception as exc:
-            if type(exc).__name__ not in _FIT_FAILURES:
+            if type(exc).__name__ not in _GP_FAILURES:
                 raise
             return [self._fallback_trial() for _ in range(n)]
         _quiet_ax()  # modules imported lazily during the first GP fit log again
