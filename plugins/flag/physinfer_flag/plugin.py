@@ -21,7 +21,7 @@ def physinfer_register_embedders(registry):
     registry.add_embedder(
         "spectral_shape",
         "physinfer_flag.sdn.embedder:spectral_shape_embedder",
-        "spectral + the clip's mean image (motion and mean pose; for diagnosing wind direction)",
+        "spectral + the clip's mean image (experimental: sees wind direction better, fits worse; see docs)",
     )
 
 

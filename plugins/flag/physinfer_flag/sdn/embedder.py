@@ -210,11 +210,12 @@ class SpectralEmbedder(Embedder):
 def spectral_shape_embedder(*, model: str | Path | None = None, device: str | None = None) -> SpectralEmbedder:
     """:class:`SpectralEmbedder` plus the mean image on a 16 × 16 grid: motion and mean shape.
 
-    For diagnosing a flag: a wind that turns or tilts the flag moves its mean pose far more
-    than its flapping spectrum. The weight (30 per unit gray level) makes the two blocks'
-    seed-to-seed spreads of the same order on the flag at 6 m/s (Euclidean 5–16 for the mean
-    image, 6–9 for the spectral features; docs/benchmarks.md, effect visibility), so neither
-    drowns the other.
+    Experimental: a wind that turns or tilts the flag moves its mean pose far more than its
+    flapping spectrum. The weight (30 per unit gray level) makes the two blocks' seed-to-seed
+    spreads of the same order on the flag at 6 m/s (Euclidean 5–16 for the mean image, 6–9
+    for the spectral features; docs/benchmarks.md, effect visibility), so neither drowns the
+    other. It separates yaw and inclination better at the true θ, but the diagnosis fitted
+    worse with it at 24 trials per stage (docs/benchmarks.md), so nothing uses it by default.
 
     Args:
         model: Must be ``None``.
