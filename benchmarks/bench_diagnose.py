@@ -55,33 +55,16 @@ BASE_BOX = 0.6
 BASE_RANGES: dict[str, tuple[float, float]] = {"amplitude": (35.0, 55.0)}
 
 
-class FixedParameters:
-    """A simulator with some parameters held fixed (removed from θ); for small-budget runs.
+def flag_lite(**config: Any) -> Any:
+    """The flag phenomenon on a coarse grid with the bending held at 1× (still named ``flag``).
 
     The flag's 15 bending multipliers make a 17-dimensional search that a dozen trials
-    cannot cover; the benchmark's ``flag_lite`` holds them at 1 (the material's own
-    stiffness, which the targets use too), leaving wind speed, area weight and the effect's
-    parameters to refine.
+    cannot cover; ``flag_lite`` holds them at 1 (the material's own stiffness, which the
+    targets use too), leaving wind speed, area weight and the effect's parameters to refine.
     """
-
-    def __init__(self, inner: Any, fixed: dict[str, float]) -> None:
-        from physinfer.parameters import ParameterSpace
-
-        self.inner, self.fixed = inner, dict(fixed)
-        self.parameter_space = ParameterSpace([s for s in inner.parameter_space if s.name not in fixed])
-
-    def simulate(self, params: Any, *, seed: int = 0) -> Any:
-        return self.inner.simulate({**self.fixed, **params}, seed=seed)
-
-    def simulate_batch(self, params: Any, *, seeds: Any) -> Any:
-        # The flag's batch engine (noise floors simulate their seeds as one batch).
-        return self.inner.simulate_batch([{**self.fixed, **p} for p in params], seeds=seeds)
-
-
-def flag_lite(**config: Any) -> Any:
-    """The flag phenomenon on a coarse grid with the bending held at 1× (still named ``flag``)."""
     import dataclasses
 
+    from physinfer.fixed import FixedParameters
     from physinfer_flag.phenomenon import make_phenomenon
     from physinfer_flag.simulator import flag_parameter_space, make_simulator
 

@@ -174,6 +174,7 @@ def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
 
 
 NON_FINITE = "the simulation produced NaN or infinite positions"
+NON_FINITE_DISTANCE = "the embedding distance is not finite"
 
 
 def simulate_one(simulator: Simulator, params: Mapping[str, float], seed: int) -> tuple[Trajectory | None, str | None]:
@@ -245,7 +246,7 @@ def evaluate(
         return None, error, timings
     distance = squared_distance(embedding, target_embedding)
     if not np.isfinite(distance):
-        return None, "the embedding distance is not finite", timings
+        return None, NON_FINITE_DISTANCE, timings
     return distance, None, timings
 
 
@@ -313,14 +314,10 @@ def evaluate_batch(
         distances[i].append(squared_distance(embedding, target_embedding))
     results = []
     for i in range(len(params)):
-        if errors[i] is not None:
-            results.append((None, errors[i], timings[i]))
-            continue
-        distance = float(np.mean(distances[i]))
-        if not np.isfinite(distance):
-            results.append((None, "the embedding distance is not finite", timings[i]))
-        else:
-            results.append((distance, None, timings[i]))
+        distance = None if errors[i] is not None else float(np.mean(distances[i]))
+        if distance is not None and not np.isfinite(distance):
+            distance, errors[i] = None, NON_FINITE_DISTANCE
+        results.append((distance, errors[i], timings[i]))
     return results
 
 
