@@ -44,7 +44,7 @@ class _DropDuplicateFallback(logging.Filter):
 #: Exceptions of a failed GP fit or acquisition optimisation (BoTorch, GPyTorch,
 #: linear_operator), matched by name so that importing this module does not import them.
 #: ``OptimizationGradientError`` (NaN acquisition gradients) was seen on a flag target with
-#: ``--batch-size 4`` after 32 trials.
+#: ``--batch-size 4``, asking for trials 17–20 (reproduced: held-out target 15 of bench_refine).
 _GP_FAILURES = frozenset({"ModelFittingError", "NotPSDError", "NanError", "OptimizationGradientError"})
 
 
