@@ -11,7 +11,9 @@ With ``batch_size`` q > 1 each step asks the optimizer for q trials at once (Ax 
 them jointly, as a batch acquisition), simulates all of them in one call of
 :meth:`~physinfer.roles.Simulator.simulate_batch` (the flag runs a batch in parallel
 compiled threads), renders each and embeds them together. Same budget, fewer optimizer
-rounds, more of the machine busy per round.
+rounds, more of the machine busy per round. A pipeline with ``workers``
+(:mod:`physinfer.trial_workers`) simulates and renders the batch on worker processes or a
+Dask cluster instead.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,7 +40,10 @@ from physinfer.roles import (
     Trial,
 )
 from physinfer.rundir import RunDirectory, TrialRecord
-from physinfer.types import Trajectory
+from physinfer.types import Clip, Trajectory
+
+if TYPE_CHECKING:
+    from physinfer.trial_workers import TrialWorkers
 
 #: run.json keys that must match for ``--resume``.
 RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed")
@@ -159,13 +164,18 @@ class RefineResult:
 
 @dataclass
 class Pipeline:
-    """The built roles of one phenomenon for one run."""
+    """The built roles of one phenomenon for one run.
+
+    ``workers``, when set, simulates and renders the trials of each step on an executor
+    (:class:`~physinfer.trial_workers.TrialWorkers`) instead of in this process.
+    """
 
     phenomenon: Phenomenon
     simulator: Simulator
     renderer: Renderer
     embedder: Embedder
     effects: Sequence[Effect] = ()
+    workers: TrialWorkers | None = None
 
 
 def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -278,32 +288,31 @@ def evaluate_batch(
 ) -> list[tuple[float | None, str | None, dict[str, float]]]:
     """:func:`evaluate_mean` of ``q`` θ, simulated as one batch and embedded together.
 
-    Every θ is simulated under every seed in one :func:`simulate_many` call; the clips are
-    rendered one by one and embedded with ``embed_many``. A θ's timings are its share of
-    the batch's simulate and embed time plus its own render time. One θ alone takes the
-    sequential path (:func:`evaluate_mean`), so ``batch_size=1`` runs exactly as before.
+    Every θ is simulated under every seed and rendered (:func:`make_clips`); the clips are
+    embedded with ``embed_many``. A θ's timings are its simulate and render time (its
+    share of a batched simulation) plus its share of the embedding time. One θ in this
+    process takes the sequential path (:func:`evaluate_mean`), so ``batch_size=1`` runs
+    exactly as before.
 
     Returns:
         One ``(distance, error, timings)`` per θ, in order.
     """
-    if len(params) == 1:
+    if len(params) == 1 and pipeline.workers is None:
         return [evaluate_mean(pipeline, params[0], target_embedding, render_params, seeds)]
     jobs = [(i, seed) for i in range(len(params)) for seed in seeds]
-    t0 = time.perf_counter()
-    simulated = simulate_many(pipeline.simulator, [params[i] for i, _ in jobs], [seed for _, seed in jobs])
-    simulate_s = (time.perf_counter() - t0) / len(jobs)
-    timings = [{"simulate": simulate_s * len(seeds), "render": 0.0, "embed": 0.0} for _ in params]
+    made = make_clips(pipeline, [params[i] for i, _ in jobs], [seed for _, seed in jobs], render_params)
+    timings = [{"simulate": 0.0, "render": 0.0, "embed": 0.0} for _ in params]
     errors: list[str | None] = [None] * len(params)
     clips, owners = [], []
-    for (i, _), (trajectory, error) in zip(jobs, simulated, strict=True):
+    for (i, _), (clip, error, job_timings) in zip(jobs, made, strict=True):
+        for phase, seconds in job_timings.items():
+            timings[i][phase] += seconds
         if errors[i] is not None:
             continue
-        if trajectory is None:
+        if clip is None:
             errors[i] = error  # failed if any seed fails, as evaluate_mean
             continue
-        t1 = time.perf_counter()
-        clips.append(pipeline.renderer.render(trajectory, render_params))
-        timings[i]["render"] += time.perf_counter() - t1
+        clips.append(clip)
         owners.append(i)
     t2 = time.perf_counter()
     embeddings = np.asarray(pipeline.embedder.embed_many(clips)) if clips else np.empty((0, 0))
@@ -319,6 +328,34 @@ def evaluate_batch(
             distance, errors[i] = None, NON_FINITE_DISTANCE
         results.append((distance, errors[i], timings[i]))
     return results
+
+
+def make_clips(
+    pipeline: Pipeline,
+    params: Sequence[Mapping[str, float]],
+    seeds: Sequence[int],
+    render_params: Mapping[str, Any],
+) -> list[tuple[Clip | None, str | None, dict[str, float]]]:
+    """Simulate and render job ``j`` = ``(params[j], seeds[j])``: ``(clip, error, timings)``.
+
+    On the pipeline's workers when it has them; otherwise all jobs in one
+    :func:`simulate_many` call (each job's simulate time is its share of the batch) and
+    rendered here one by one. A failed simulation gives ``(None, reason, timings)``.
+    """
+    if pipeline.workers is not None:
+        return pipeline.workers.clips(params, seeds, render_params)
+    t0 = time.perf_counter()
+    simulated = simulate_many(pipeline.simulator, params, seeds)
+    simulate_s = (time.perf_counter() - t0) / max(len(params), 1)
+    made: list[tuple[Clip | None, str | None, dict[str, float]]] = []
+    for trajectory, error in simulated:
+        if trajectory is None:
+            made.append((None, error, {"simulate": simulate_s}))
+            continue
+        t1 = time.perf_counter()
+        clip = pipeline.renderer.render(trajectory, render_params)
+        made.append((clip, None, {"simulate": simulate_s, "render": time.perf_counter() - t1}))
+    return made
 
 
 def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:

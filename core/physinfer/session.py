@@ -114,12 +114,16 @@ def refine(
     select_top: int = 0,
     select_seeds: int = 3,
     batch_size: int = 1,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
     ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
     in and the refinement is warm-started from its values. ``fixed`` holds parameters at
-    given values (``NAME=VALUE``, patterns allowed) and refines the rest.
+    given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
+    (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
+    step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     model_file = None
@@ -177,7 +181,13 @@ def refine(
         space = pipeline.simulator.parameter_space
         start = model_file.start_for(full_parameter_space(pipeline))  # fixed parameters dropped below
         factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
-    with _progress(budget, enabled=progress) as on_trial:
+    from physinfer.trial_workers import PipelineSpec, trial_workers
+
+    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed))
+    with (
+        trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
+        _progress(budget, enabled=progress) as on_trial,
+    ):
         result = run_refinement(
             pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
         )
@@ -185,6 +195,8 @@ def refine(
 
     if fixed_values:
         result.extra["fixed"] = fixed_values
+    if executor is not None:
+        result.extra["executor"] = executor
     write_video(run_dir.path / "target.mp4", target.clip)
     write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()

@@ -279,6 +279,22 @@ def refine_cmd(
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
     batch_size: BatchSizeOpt = 1,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers",
+            help="Simulate and render each step's trials in K local worker processes (with --batch-size "
+            "or --seeds-per-trial; 0: the same path in this process). Default: in this process.",
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Simulate and render the trials on a Dask cluster (tcp://host:8786); its workers need "
+            "physinfer and the plugin installed.",
+        ),
+    ] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -315,6 +331,8 @@ def refine_cmd(
         select_top=select_top,
         select_seeds=select_seeds,
         batch_size=batch_size,
+        workers=workers,
+        scheduler=scheduler,
     )
     summary = result.summary()
     if as_json:

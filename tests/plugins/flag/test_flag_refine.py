@@ -70,3 +70,15 @@ def test_a_batch_of_flags_gives_the_distances_of_single_trials(tmp_path):
     batched = refine(registry, out=tmp_path / "q2", batch_size=2, **quick)
     assert [t.x for t in batched.trials] == [t.x for t in single.trials]
     assert [t.distance for t in batched.trials] == pytest.approx([t.distance for t in single.trials], rel=1e-4)
+
+
+@pytest.mark.slow
+def test_flag_trials_on_worker_processes_match_the_in_process_batch(tmp_path):
+    """Numba simulation and EGL rendering in spawned workers give this process's distances."""
+    quick = ["--steps", "4", "--batch-size", "2", "--optimizer", "random", "--noise-samples", "0",
+             "--floor-samples", "0", "--json"]
+    cli("refine", "--plugin", "flag", "--out", str(tmp_path / "here"), *quick)
+    data = cli("refine", "--plugin", "flag", "--out", str(tmp_path / "workers"), "--workers", "2", *quick)
+    assert data["executor"]["kind"] == "processes"
+    here, there = (RunDirectory(tmp_path / name).read_trials() for name in ("here", "workers"))
+    assert [t.distance for t in there] == pytest.approx([t.distance for t in here], rel=1e-9)

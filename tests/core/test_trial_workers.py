@@ -1,0 +1,74 @@
+"""Refinement trials simulated and rendered on worker processes and on a real Dask cluster."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.errors import UserInputError
+from physinfer.plugins import load_registry
+from physinfer.session import refine
+
+BIN = Path(sys.executable).parent / "physinfer"
+QUICK = dict(plugin="pendulum", steps=5, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
+
+
+def cli(*args):
+    proc = subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)
+
+
+@pytest.fixture(scope="module")
+def in_process(tmp_path_factory):
+    """The reference: q = 2, two seeds per trial, everything in this process."""
+    registry, _ = load_registry()
+    return refine(registry, out=tmp_path_factory.mktemp("ref") / "r", batch_size=2, seeds_per_trial=2, **QUICK)
+
+
+def test_local_worker_processes_log_the_same_trials(tmp_path, in_process):
+    out = tmp_path / "r"
+    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--noise-samples", "0",
+               "--floor-samples", "0", "--batch-size", "2", "--seeds-per-trial", "2", "--workers", "2",
+               "--out", str(out), "--json")
+    assert data["executor"] == {"kind": "processes", "workers": 2, "threads": 1, "address": None}
+    trials = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    assert [t["x"] for t in trials] == [t.x for t in in_process.trials]
+    assert [t["distance"] for t in trials] == pytest.approx([t.distance for t in in_process.trials], rel=1e-9)
+    assert all(t["timings"]["simulate"] > 0 and t["timings"]["render"] > 0 for t in trials)
+    assert json.loads((out / "result.json").read_text())["executor"]["kind"] == "processes"
+
+
+def test_a_dask_cluster_runs_the_trials(tmp_path, in_process):
+    distributed = pytest.importorskip("distributed")
+    registry, _ = load_registry()
+    with distributed.LocalCluster(
+        n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None
+    ) as cluster:
+        result = refine(registry, out=tmp_path / "r", batch_size=2, seeds_per_trial=2,
+                        scheduler=cluster.scheduler_address, **QUICK)
+    assert result.extra["executor"]["kind"] == "dask" and result.extra["executor"]["workers"] == 2
+    assert [t.distance for t in result.trials] == pytest.approx([t.distance for t in in_process.trials], rel=1e-9)
+
+
+def test_a_failure_on_a_worker_fails_only_its_own_trial(tmp_path, long_pendulums_blow_up):
+    """``workers=0`` runs the worker path in this process, where the fixture's patch applies."""
+    registry, _ = load_registry()
+    result = refine(registry, plugin="pendulum", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
+                    progress=False, batch_size=4, seeds_per_trial=2, workers=0)
+    assert result.extra["executor"]["kind"] == "inline"
+    long = [t for t in result.trials if t.params["length"] > 1.3]
+    short = [t for t in result.trials if t.params["length"] <= 1.3]
+    assert long and short, "seed 3 draws both kinds"
+    assert all(t.status == "failed" and "blew up" in t.error for t in long)
+    assert all(t.status == "ok" and np.isfinite(t.distance) for t in short)
+
+
+def test_negative_workers_are_refused(tmp_path):
+    registry, _ = load_registry()
+    with pytest.raises(UserInputError, match="--workers must be 0"):
+        refine(registry, out=tmp_path / "r", workers=-1, **QUICK)
+
