@@ -28,8 +28,10 @@ Variants (each its own rows in ``results.jsonl``): ``--fix NAME=VALUE`` holds pa
 ``--select-top M`` reports the best of the M best trials re-simulated under fresh seeds
 (``--reuse-trials`` continues finished runs in ``--out`` instead of re-running them);
 ``--duration S`` makes every simulation, the targets' included, record S seconds (with
-``--weights`` of an SDN trained on clips that long); ``--batch-size Q`` proposes and
-simulates Q trials per optimizer step (``step_s`` then counts each trial's share of its
+``--weights`` of an SDN trained on clips that long, or ``--embedder spectral
+--embedder-frames N`` so the parameter-free embedder reads N frames instead of 30; as
+``refine --duration / --embedder-frames``); ``--batch-size Q`` proposes and simulates Q
+trials per optimizer step (``step_s`` then counts each trial's share of its
 batch's time).
 """
 
@@ -176,6 +178,8 @@ def main() -> None:
     parser.add_argument("--weights", default=None, help="embedder weights (default: shipped)")
     parser.add_argument("--duration", type=float, default=None,
                         help="seconds every simulation records, targets included (e.g. 4 for a 100-frame SDN)")
+    parser.add_argument("--embedder-frames", type=int, default=None,
+                        help="frames the spectral embedder reads (default 30; e.g. 200 with --duration 8)")
     parser.add_argument("--noise-samples", type=int, default=3)
     parser.add_argument("--seeds-per-trial", type=int, default=1)
     parser.add_argument("--floor-samples", type=int, default=4)
@@ -196,11 +200,8 @@ def main() -> None:
 
     registry, _ = load_registry()
     pipeline = build_pipeline(registry, args.plugin, embedder=args.embedder,
-                              weights=Path(args.weights) if args.weights else None, fixed=args.fix)
-    if args.duration is not None:  # a phenomenon whose make_simulator takes duration_s
-        if args.fix:
-            raise SystemExit("--duration with --fix is not supported")
-        pipeline.simulator = pipeline.phenomenon.make_simulator((), duration_s=args.duration)
+                              weights=Path(args.weights) if args.weights else None, fixed=args.fix,
+                              duration_s=args.duration, embedder_frames=args.embedder_frames)
     args.embedder = args.embedder or pipeline.phenomenon.default_embedder
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -213,6 +214,8 @@ def main() -> None:
     del settings["reuse_trials"]  # how the trials were obtained does not change them
     if args.duration is None:
         del settings["duration"]  # rows from before --duration stay reusable
+    if args.embedder_frames is None:
+        del settings["embedder_frames"]  # and rows from before --embedder-frames
     if args.batch_size == 1:
         del settings["batch_size"]  # and rows from before --batch-size
     done = logged_rows(log, settings)

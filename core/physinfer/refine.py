@@ -46,7 +46,10 @@ if TYPE_CHECKING:
     from physinfer.trial_workers import TrialWorkers
 
 #: run.json keys that must match for ``--resume``.
-RESUME_KEYS = ("plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed")
+RESUME_KEYS = (
+    "plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed",
+    "duration_s", "embedder_frames",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)

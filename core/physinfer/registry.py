@@ -7,6 +7,7 @@ provides what, and resolve their implementation only when first used.
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -143,3 +144,15 @@ class Registry:
         return {
             kind: sorted(n for n, e in self.entries[kind].items() if e.plugin == plugin) for kind in KINDS
         }
+
+
+def accepts_keyword(factory: Any, name: str) -> bool:
+    """Whether ``factory`` (a function or class) accepts the keyword argument ``name``.
+
+    Optional plugin capabilities are keywords of their factories (``make_simulator``'s
+    ``duration_s``, a parameter-free embedder's ``n_frames``).
+    """
+    try:
+        return name in inspect.signature(factory).parameters
+    except (TypeError, ValueError):  # builtins and some callables have no signature
+        return False

@@ -13,7 +13,7 @@ from typing import Any
 from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace, parse_float_assignments
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
-from physinfer.registry import Registry
+from physinfer.registry import Registry, accepts_keyword
 from physinfer.roles import Target
 from physinfer.rundir import RunDirectory, TrialRecord
 
@@ -27,6 +27,8 @@ def build_pipeline(
     weights: Path | None = None,
     device: str | None = None,
     fixed: Sequence[str] = (),
+    duration_s: float | None = None,
+    embedder_frames: int | None = None,
 ) -> Pipeline:
     """Build simulator (with effects), renderer and embedder of a phenomenon.
 
@@ -39,20 +41,51 @@ def build_pipeline(
         device: torch device for the embedder.
         fixed: ``NAME=VALUE`` items (patterns allowed) held fixed and left out of θ (see
             :mod:`physinfer.fixed`).
+        duration_s: Seconds every simulation records (``None``: the phenomenon's default);
+            for phenomena whose ``make_simulator`` takes ``duration_s``.
+        embedder_frames: Frames the embedder reads (``None``: its default); for embedders
+            whose factory takes ``n_frames`` (parameter-free ones; an SDN's are in its weights).
+
+    Raises:
+        UserInputError: a duration the phenomenon cannot record, or frames the embedder
+            cannot be told.
     """
     from physinfer.fixed import FixedParameters, resolve_fixed
 
     phenomenon = registry.phenomenon(plugin)
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
-    simulator = phenomenon.make_simulator(effect_objs)
+    simulator = _make_simulator(phenomenon, effect_objs, duration_s)
     if fixed:
         simulator = FixedParameters(simulator, resolve_fixed(simulator.parameter_space, fixed))
     renderer = phenomenon.make_renderer()
     embedder_obj: Any = None
     if embedder != "":
         name = embedder or phenomenon.default_embedder
-        embedder_obj = registry.embedder(name, model=str(weights) if weights else None, device=device)
+        options: dict[str, Any] = {"model": str(weights) if weights else None, "device": device}
+        if embedder_frames is not None:
+            if not accepts_keyword(registry.get("embedders", name).load(), "n_frames"):
+                raise UserInputError(
+                    f"--embedder-frames: the embedder {name!r} reads a fixed number of frames (an SDN's "
+                    "are set by its weights); use it with a parameter-free embedder such as 'spectral'"
+                )
+            options["n_frames"] = embedder_frames
+        embedder_obj = registry.embedder(name, **options)
     return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
+
+
+def _make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | None) -> Any:
+    """The phenomenon's simulator, recording ``duration_s`` seconds when given."""
+    if duration_s is None:
+        return phenomenon.make_simulator(effects)
+    if not duration_s > 0:
+        raise UserInputError(f"--duration must be positive seconds, got {duration_s:g}")
+    if not accepts_keyword(phenomenon.make_simulator, "duration_s"):
+        raise UserInputError(
+            f"--duration: the phenomenon {phenomenon.name!r} records a fixed length (its make_simulator "
+            "takes no duration_s); drop --duration"
+        )
+    return phenomenon.make_simulator(effects, duration_s=duration_s)
+
 
 
 def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
@@ -116,6 +149,8 @@ def refine(
     batch_size: int = 1,
     workers: int | None = None,
     scheduler: str | None = None,
+    duration_s: float | None = None,
+    embedder_frames: int | None = None,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
@@ -124,6 +159,7 @@ def refine(
     given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
     (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
     step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
+    ``duration_s`` and ``embedder_frames``: see :func:`build_pipeline`.
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     model_file = None
@@ -133,8 +169,9 @@ def refine(
         model_file = model_for_refine(model, plugin, effects)
         effects = model_file.effects
     pipeline = build_pipeline(
-        registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed
-    )
+        registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
+        duration_s=duration_s, embedder_frames=embedder_frames,
+    )  # fmt: skip
     from physinfer.fixed import split_fixed
 
     fixed_values = split_fixed(pipeline.simulator)[1]
@@ -174,6 +211,10 @@ def refine(
     }
     if fixed_values:  # absent when nothing is fixed, so runs from before --fix still resume
         run_info["fixed"] = fixed_values
+    if duration_s is not None:  # absent by default too, for the same reason
+        run_info["duration_s"] = duration_s
+    if embedder_frames is not None:
+        run_info["embedder_frames"] = embedder_frames
     factory = registry.get("optimizers", optimizer).load()
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory
@@ -183,7 +224,7 @@ def refine(
         factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
     from physinfer.trial_workers import PipelineSpec, trial_workers
 
-    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed))
+    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)
     with (
         trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
         _progress(budget, enabled=progress) as on_trial,

@@ -34,6 +34,8 @@ class PipelineSpec:
         plugin: Phenomenon name (installed on every worker).
         effects: Effect names switched in.
         fixed: ``NAME=VALUE`` items held fixed (``refine --fix``).
+        duration_s: Seconds each simulation records (``refine --duration``; ``None``:
+            the phenomenon's default).
         threads: Thread cap per worker process for numerical libraries and llvmpipe
             (``None``: leave the process as it is).
     """
@@ -41,6 +43,7 @@ class PipelineSpec:
     plugin: str
     effects: tuple[str, ...] = ()
     fixed: tuple[str, ...] = ()
+    duration_s: float | None = None
     threads: int | None = 1
 
 
@@ -56,7 +59,7 @@ def worker_pipeline(spec: PipelineSpec) -> Any:
             limit_threads(spec.threads)
         registry, _ = load_registry()
         cache[spec] = build_pipeline(
-            registry, spec.plugin, effects=spec.effects, embedder="", fixed=spec.fixed
+            registry, spec.plugin, effects=spec.effects, embedder="", fixed=spec.fixed, duration_s=spec.duration_s
         )
     return cache[spec]
 

@@ -160,3 +160,10 @@ def test_batch_size_must_be_positive(tmp_path):
     registry, _ = load_registry()
     with pytest.raises(UserInputError, match="--batch-size must be at least 1, got 0"):
         refine(registry, plugin="pendulum", steps=3, out=tmp_path / "r", progress=False, batch_size=0)
+
+
+def test_a_duration_the_phenomenon_cannot_record_is_refused(tmp_path):
+    registry, _ = load_registry()
+    with pytest.raises(UserInputError, match="'pendulum' records a fixed length"):
+        refine(registry, plugin="pendulum", steps=2, out=tmp_path / "r", progress=False, duration_s=3.0)
+    assert not (tmp_path / "r").exists()

@@ -43,6 +43,14 @@ SelectTopOpt = Annotated[
     ),
 ]
 SelectSeedsOpt = Annotated[int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")]
+DurationOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--duration",
+        help="Seconds every simulation records (default: the plugin's; the flag's 2.4 s). Longer clips "
+        "are for an embedder that reads more frames (--embedder-frames, or an SDN trained on them).",
+    ),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(
@@ -174,6 +182,7 @@ def simulate_cmd(
         list[str], typer.Option("--render-set", help="Render setting NAME=VALUE (repeatable).")
     ] = [],  # noqa: B006
     seed: SeedOpt = 0,
+    duration: DurationOpt = None,
     out: Annotated[Path | None, typer.Option("--out", help="Video to write (.mp4 or .gif).")] = None,
     trajectory_out: Annotated[
         Path | None, typer.Option("--trajectory-out", help="Trajectory NPZ to write.")
@@ -189,7 +198,7 @@ def simulate_cmd(
     if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
     registry, _ = registry_and_infos()
-    pipeline = build_pipeline(registry, plugin, effects=effect, embedder=None)
+    pipeline = build_pipeline(registry, plugin, effects=effect, embedder="", duration_s=duration)
     params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
     # Check ζ before simulating: a typo should not cost a simulation.
     zeta = pipeline.renderer.check_render_params(
@@ -295,6 +304,15 @@ def refine_cmd(
             "physinfer and the plugin installed.",
         ),
     ] = None,
+    duration: DurationOpt = None,
+    embedder_frames: Annotated[
+        int | None,
+        typer.Option(
+            "--embedder-frames",
+            help="Frames a parameter-free embedder reads (the flag's spectral: default 30; e.g. 200 "
+            "with --duration 8). An SDN's frames are set by its weights.",
+        ),
+    ] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -333,6 +351,8 @@ def refine_cmd(
         batch_size=batch_size,
         workers=workers,
         scheduler=scheduler,
+        duration_s=duration,
+        embedder_frames=embedder_frames,
     )
     summary = result.summary()
     if as_json:

@@ -14,7 +14,6 @@ built at the stored size subclasses it and names it in ``Phenomenon.dataset_gene
 
 from __future__ import annotations
 
-import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -24,7 +23,7 @@ import numpy as np
 from physinfer.datasets.presets import DEFAULT_PRESETS, ClipFormat, DatasetPreset
 from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
-from physinfer.registry import resolve
+from physinfer.registry import accepts_keyword, resolve
 from physinfer.roles import Effect, Params, Phenomenon, Renderer, Simulator
 from physinfer.types import Clip, Trajectory
 
@@ -192,11 +191,7 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
 
 def accepts_duration(make_simulator: Any) -> bool:
     """Whether a ``make_simulator`` factory takes the ``duration_s`` keyword."""
-    try:
-        parameters = inspect.signature(make_simulator).parameters
-    except (TypeError, ValueError):  # builtins and some callables have no signature
-        return False
-    return "duration_s" in parameters
+    return accepts_keyword(make_simulator, "duration_s")
 
 
 def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> DatasetGenerator:

@@ -82,3 +82,28 @@ def test_flag_trials_on_worker_processes_match_the_in_process_batch(tmp_path):
     assert data["executor"]["kind"] == "processes"
     here, there = (RunDirectory(tmp_path / name).read_trials() for name in ("here", "workers"))
     assert [t.distance for t in there] == pytest.approx([t.distance for t in here], rel=1e-9)
+
+
+def test_longer_clips_for_the_spectral_embedder(tmp_path):
+    """``--duration`` records longer clips, ``--embedder-frames`` has the spectral embedder read them all."""
+    target = tmp_path / "long.mp4"
+    made = cli("simulate", "--plugin", "flag", "--set", "wind_speed=4", "--duration", "4", "--seed", "5",
+               "--out", str(target), "--json")
+    assert read_video(target).frames.shape[0] == 100 and made["params"]["wind_speed"] == 4
+    out = tmp_path / "run"
+    common = ["refine", "--plugin", "flag", "--target", str(target), "--duration", "4", "--embedder", "spectral",
+              "--noise-samples", "0", "--floor-samples", "0", "--optimizer", "random", "--out", str(out)]
+    data = cli(*common, "--steps", "2", "--embedder-frames", "100", "--json")
+    assert data["n_trials"] == 2 and data["n_failed"] == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["duration_s"] == 4 and run["embedder_frames"] == 100
+    other = subprocess.run([str(BIN), *common, "--steps", "3", "--embedder-frames", "60", "--resume"],
+                           capture_output=True, text=True, timeout=300)
+    assert other.returncode != 0 and "embedder_frames=100" in other.stderr
+
+
+def test_embedder_frames_need_a_parameter_free_embedder(tmp_path):
+    proc = subprocess.run([str(BIN), "refine", "--plugin", "flag", "--embedder-frames", "100", "--steps", "2",
+                           "--out", str(tmp_path / "r")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "an SDN's are set by its weights" in " ".join(proc.stderr.split())
+    assert not (tmp_path / "r").exists()

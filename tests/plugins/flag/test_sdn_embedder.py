@@ -90,6 +90,19 @@ def test_spectral_embedder_defaults_and_refuses_weights():
         SpectralEmbedder(config=SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=40))
 
 
+def test_spectral_embedder_reads_the_frames_it_is_told():
+    """``n_frames`` (``refine --embedder-frames``) replaces the front end's 30 and nothing else."""
+    config = SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=4)
+    longer = SpectralEmbedder(config=config, device="cpu", n_frames=32)
+    assert longer.n_frames == 32 and longer.config.frontend == FrontEndConfig(n_frames=32, size=32)
+    clip = grating_clip(n_frames=80)  # 40 frames at 25 fps after resampling
+    assert not np.allclose(longer.embed(clip), SpectralEmbedder(config=config, device="cpu").embed(clip))
+    with pytest.raises(UserInputError, match="needs at least 48 frames"):
+        SpectralEmbedder(config=config, device="cpu", n_frames=48).embed(clip)
+    with pytest.raises(UserInputError, match="n_frames must be at least 4"):
+        SpectralEmbedder(config=config, n_frames=2)
+
+
 def test_spectral_shape_appends_the_weighted_mean_image_to_the_spectral_features():
     config = SpectralEmbedderConfig(frontend=SMALL_FRONT, grid=4, shape_grid=2, shape_weight=10.0)
     shaped = SpectralEmbedder(config=config, device="cpu")

@@ -11,7 +11,7 @@ as a baseline and a fallback.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -150,6 +150,8 @@ class SpectralEmbedder(Embedder):
         config: Settings.
         model: Must be ``None`` (accepted for the uniform embedder factory signature).
         device: Torch device (default: cuda if available, else cpu).
+        n_frames: Frames read from each clip, replacing ``config.frontend.n_frames`` (30):
+            ``refine --embedder-frames``, for clips longer than the default (``--duration``).
 
     Raises:
         UserInputError: when a model is given.
@@ -161,12 +163,16 @@ class SpectralEmbedder(Embedder):
         config: SpectralEmbedderConfig | None = None,
         model: str | Path | None = None,
         device: str | None = None,
+        n_frames: int | None = None,
     ) -> None:
         if model is not None:
             raise UserInputError(
                 "the spectral embedder has no weights; drop --model or choose --embedder sdn"
             )
         self.config = config or SpectralEmbedderConfig()
+        if n_frames is not None:
+            frontend = replace(self.config.frontend, n_frames=int(n_frames))
+            self.config = replace(self.config, frontend=frontend)
         try:
             self.config.validate()
         except ValueError as exc:
@@ -207,7 +213,9 @@ class SpectralEmbedder(Embedder):
         return cells.flatten(1) * self.config.shape_weight
 
 
-def spectral_shape_embedder(*, model: str | Path | None = None, device: str | None = None) -> SpectralEmbedder:
+def spectral_shape_embedder(
+    *, model: str | Path | None = None, device: str | None = None, n_frames: int | None = None
+) -> SpectralEmbedder:
     """:class:`SpectralEmbedder` plus the mean image on a 16 × 16 grid: motion and mean shape.
 
     Experimental: a wind that turns or tilts the flag moves its mean pose far more than its
@@ -220,5 +228,8 @@ def spectral_shape_embedder(*, model: str | Path | None = None, device: str | No
     Args:
         model: Must be ``None``.
         device: Torch device.
+        n_frames: Frames read from each clip (default 30).
     """
-    return SpectralEmbedder(config=SpectralEmbedderConfig(shape_grid=16), model=model, device=device)
+    return SpectralEmbedder(
+        config=SpectralEmbedderConfig(shape_grid=16), model=model, device=device, n_frames=n_frames
+    )
