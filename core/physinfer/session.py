@@ -87,7 +87,6 @@ def _make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float |
     return phenomenon.make_simulator(effects, duration_s=duration_s)
 
 
-
 def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
     """Every parameter of the pipeline's simulator, fixed ones included."""
     from physinfer.fixed import split_fixed
