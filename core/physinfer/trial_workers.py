@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import Executor
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from physinfer.types import Clip
@@ -134,6 +134,8 @@ def trial_workers(
         executor,
         info,
     ):
+        if info.kind == "inline":  # this very process: its thread settings are not the worker's to cap
+            spec = replace(spec, threads=None)
         pipeline.workers = TrialWorkers(executor, spec)
         try:
             yield asdict(info)

@@ -1,6 +1,7 @@
 """The refinement loop for real, on the pendulum example plugin."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -144,11 +145,16 @@ def test_ax_proposes_batches_through_the_cli_and_resumes_with_another_size(tmp_p
 
 @pytest.mark.parametrize("workers", [None, 0], ids=["in-process", "worker-path"])
 def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, long_pendulums_blow_up, workers):
-    """``workers=0`` sends the jobs through the worker path in this process, where the patch applies."""
+    """``workers=0`` sends the jobs through the worker path in this process, where the patch applies.
+
+    In this process the worker path must not cap its threads (numba refuses a later change).
+    """
     registry, _ = load_registry()
+    threads_env = os.environ.get("NUMBA_NUM_THREADS")
     result = refine(registry, plugin="pendulum", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
                     progress=False, batch_size=4, seeds_per_trial=2, workers=workers)
     assert result.extra.get("executor", {}).get("kind") == (None if workers is None else "inline")
+    assert os.environ.get("NUMBA_NUM_THREADS") == threads_env
     long = [t for t in result.trials if t.params["length"] > 1.3]
     short = [t for t in result.trials if t.params["length"] <= 1.3]
     assert long and short, "seed 3 draws both kinds"
