@@ -29,20 +29,10 @@ import torch
 
 from physinfer.datasets import ClipDataset
 from physinfer.io import atomic_write_json
-from physinfer_flag.sdn.baselines import CNNLSTM, CNNLSTMConfig, ResNet18Frames, ResNetFramesConfig
 from physinfer_flag.sdn.data import PreparedClips, SDNDataset, subset
 from physinfer_flag.sdn.evaluation import RegressionConfig, evaluate_wind
 from physinfer_flag.sdn.frontend import FrontEndConfig
-
-#: The paper's input lengths of the two baselines.
-DEFAULT_FRAMES = {"resnet18": 20, "cnn_lstm": 10}
-
-
-def backbone_of(name: str, n_frames: int) -> torch.nn.Module:
-    """A freshly initialised baseline network."""
-    if name == "resnet18":
-        return ResNet18Frames(config=ResNetFramesConfig(n_frames=n_frames))
-    return CNNLSTM(config=CNNLSTMConfig(n_frames=n_frames))
+from physinfer_flag.sdn.workflows import regression_backbone
 
 
 def prepared_split(data: Path, split: str, config: FrontEndConfig) -> SDNDataset:
@@ -53,18 +43,18 @@ def prepared_split(data: Path, split: str, config: FrontEndConfig) -> SDNDataset
 
 def run_model(args: argparse.Namespace, name: str) -> dict[str, Any]:
     """Train one baseline with its head on ``train`` and score it on ``test``."""
-    n_frames = args.frames or DEFAULT_FRAMES[name]
-    frontend = dataclasses.replace(FrontEndConfig(), n_frames=n_frames, size=args.size)
+    torch.manual_seed(args.seed)  # the baseline's initialisation
+    size = dataclasses.replace(FrontEndConfig(), size=args.size)
+    backbone, frontend = regression_backbone(name, args.frames, size, args.device)
     t0 = time.perf_counter()
     train, test = (prepared_split(args.data, s, frontend) for s in ("train", "test"))
     prepare_s = time.perf_counter() - t0
-    torch.manual_seed(args.seed)
     config = RegressionConfig(epochs=args.epochs, finetune=True, seed=args.seed, progress=True)
     t0 = time.perf_counter()
-    scores = evaluate_wind(backbone_of(name, n_frames), train, test, config=config, device=args.device)
+    scores = evaluate_wind(backbone, train, test, config=config, device=args.device)
     return {
         "model": name,
-        "frames": n_frames,
+        "frames": frontend.n_frames,
         "size": args.size,
         "epochs": args.epochs,
         "n_train": len(train),
@@ -79,7 +69,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, required=True, help="FlagSim dataset directory")
     parser.add_argument("--out", type=Path, required=True, help="directory of one JSON per model")
-    parser.add_argument("--models", nargs="+", default=["resnet18", "cnn_lstm"], choices=list(DEFAULT_FRAMES))
+    parser.add_argument("--models", nargs="+", default=["resnet18", "cnn_lstm"], choices=["resnet18", "cnn_lstm"])
     parser.add_argument("--size", type=int, default=224, help="input side in px (224 in the paper)")
     parser.add_argument("--frames", type=int, default=None, help="input frames (default: 20 / 10, as the paper)")
     parser.add_argument("--epochs", type=int, default=30, help="epochs of backbone and head together")

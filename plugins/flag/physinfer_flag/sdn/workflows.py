@@ -167,7 +167,7 @@ def evaluate_wind_in_directory(
         ``{"mse", "acc_at_0_5", "n", "model"}`` on the test split.
     """
     config = config or RegressionConfig()
-    backbone, frontend = _regression_backbone(model, n_frames, spectral_frontend, device)
+    backbone, frontend = regression_backbone(model, n_frames, spectral_frontend, device)
     if isinstance(backbone, (ResNet18Frames, CNNLSTM)):
         config = dataclasses.replace(config, finetune=True)
     train = open_split(data, "train", frontend)
@@ -188,10 +188,15 @@ def _embedding_model(
     return load_sdn(model, device)
 
 
-def _regression_backbone(
+def regression_backbone(
     model: str | Path, n_frames: int | None, spectral: FrontEndConfig | None, device: str | None
 ) -> tuple[nn.Module, FrontEndConfig]:
-    """The backbone and the clip preparation it needs (frames, size, fps)."""
+    """The backbone and the clip preparation it needs (frames, size, fps).
+
+    ``model``: SDN weights or a baseline name (``spectral``, ``resnet18``, ``cnn_lstm``; the
+    learned baselines freshly initialised, reading ``n_frames`` or the paper's 20 / 10);
+    ``spectral`` gives the size and rate of the clips (default: the SDN's).
+    """
     name = str(model)
     frontend = spectral or FrontEndConfig()
     if name == "spectral":
