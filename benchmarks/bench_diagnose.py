@@ -157,6 +157,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             effect_steps=args.effect_steps,
             optimizer=args.optimizer,
             embedder=args.embedder,
+            embedder_frames=args.embedder_frames,
             seed=seed,
             floor_samples=args.floor_samples,
             select_top=args.select_top,
@@ -297,6 +298,8 @@ def main() -> None:
     parser.add_argument("--render-size", type=int, default=None)
     parser.add_argument("--frames", type=int, default=None,
                         help="flag_lite: recorded frames per clip (default 40; grid_spectrum needs 100)")
+    parser.add_argument("--embedder-frames", type=int, default=None,
+                        help="frames a parameter-free embedder reads (default: its own; spectral 30)")
     parser.add_argument("--floor-samples", type=int, default=4)
     parser.add_argument("--select-top", type=int, default=0,
                         help="each stage re-simulates its best M trials and keeps the lowest mean (0: off)")

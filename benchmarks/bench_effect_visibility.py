@@ -80,7 +80,8 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
     from physinfer.session import build_pipeline
 
     embedder = args.embedder if args.features == "embedder" else ""
-    pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=embedder)
+    pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=embedder,
+                              embedder_frames=args.embedder_frames if embedder else None)
     base_space = pipeline.phenomenon.parameter_space
     theta = base_space.from_unit(np.zeros(len(base_space)))
     theta["wind_speed"] = wind
@@ -135,6 +136,8 @@ def main() -> None:
     parser.add_argument("--embedder", default="spectral")
     parser.add_argument("--render-size", type=int, default=112)
     parser.add_argument("--frames", type=int, default=40, help="clip length (the SDN needs at least 60)")
+    parser.add_argument("--embedder-frames", type=int, default=None,
+                        help="frames a parameter-free embedder reads (default: its own; spectral 30)")
     parser.add_argument("--winds", default="3,6", help="wind speeds in m/s, comma-separated")
     parser.add_argument("--seeds", type=int, default=6, help="K re-simulations per side")
     parser.add_argument("--strength", action="append", default=[], metavar="NAME=VALUE",

@@ -54,7 +54,7 @@ def build_pipeline(
 
     phenomenon = registry.phenomenon(plugin)
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
-    simulator = _make_simulator(phenomenon, effect_objs, duration_s)
+    simulator = make_simulator(phenomenon, effect_objs, duration_s)
     if fixed:
         simulator = FixedParameters(simulator, resolve_fixed(simulator.parameter_space, fixed))
     renderer = phenomenon.make_renderer()
@@ -73,8 +73,12 @@ def build_pipeline(
     return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
 
 
-def _make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | None) -> Any:
-    """The phenomenon's simulator, recording ``duration_s`` seconds when given."""
+def make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | None = None) -> Any:
+    """The phenomenon's simulator with ``effects``, recording ``duration_s`` seconds when given.
+
+    Raises:
+        UserInputError: a duration that is not positive, or one the phenomenon cannot record.
+    """
     if duration_s is None:
         return phenomenon.make_simulator(effects)
     if not duration_s > 0:
@@ -85,6 +89,20 @@ def _make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float |
             "takes no duration_s); drop --duration"
         )
     return phenomenon.make_simulator(effects, duration_s=duration_s)
+
+
+def clip_settings(duration_s: float | None, embedder_frames: int | None) -> dict[str, Any]:
+    """The ``run.json`` entries of ``--duration`` and ``--embedder-frames``: only those set.
+
+    Both are resume keys; leaving an unset one out keeps runs made before the option existed
+    resumable.
+    """
+    settings: dict[str, Any] = {}
+    if duration_s is not None:
+        settings["duration_s"] = duration_s
+    if embedder_frames is not None:
+        settings["embedder_frames"] = embedder_frames
+    return settings
 
 
 def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
@@ -210,10 +228,7 @@ def refine(
     }
     if fixed_values:  # absent when nothing is fixed, so runs from before --fix still resume
         run_info["fixed"] = fixed_values
-    if duration_s is not None:  # absent by default too, for the same reason
-        run_info["duration_s"] = duration_s
-    if embedder_frames is not None:
-        run_info["embedder_frames"] = embedder_frames
+    run_info.update(clip_settings(duration_s, embedder_frames))  # absent by default too, for the same reason
     factory = registry.get("optimizers", optimizer).load()
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory

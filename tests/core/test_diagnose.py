@@ -333,6 +333,15 @@ def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):
     assert again["calibration"][0]["gap_control"] is None
 
 
+def test_a_duration_the_phenomenon_cannot_record_is_refused_before_anything_is_written(tmp_path: Path):
+    target = _pendulum_target(tmp_path, None)
+    with pytest.raises(UserInputError, match="records a fixed length"):
+        _diagnose(tmp_path, target, steps=2, optimizer="random", duration_s=3.0)
+    with pytest.raises(UserInputError, match="an SDN's are set by its weights|reads a fixed number"):
+        _diagnose(tmp_path, target, steps=2, optimizer="random", embedder_frames=40)
+    assert not (tmp_path / "diag-none").exists()
+
+
 @pytest.mark.slow
 def test_hidden_drag_is_named_and_the_gap_shrinks(tmp_path: Path):
     report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=16, optimizer="ax")

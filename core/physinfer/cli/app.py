@@ -51,6 +51,14 @@ DurationOpt = Annotated[
         "are for an embedder that reads more frames (--embedder-frames, or an SDN trained on them).",
     ),
 ]
+EmbedderFramesOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--embedder-frames",
+        help="Frames a parameter-free embedder reads (the flag's spectral: default 30; e.g. 200 "
+        "with --duration 8). An SDN's frames are set by its weights.",
+    ),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(
@@ -305,14 +313,7 @@ def refine_cmd(
         ),
     ] = None,
     duration: DurationOpt = None,
-    embedder_frames: Annotated[
-        int | None,
-        typer.Option(
-            "--embedder-frames",
-            help="Frames a parameter-free embedder reads (the flag's spectral: default 30; e.g. 200 "
-            "with --duration 8). An SDN's frames are set by its weights.",
-        ),
-    ] = None,
+    embedder_frames: EmbedderFramesOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""

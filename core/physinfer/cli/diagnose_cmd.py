@@ -13,6 +13,8 @@ import typer
 
 from physinfer.cli.app import (
     BatchSizeOpt,
+    DurationOpt,
+    EmbedderFramesOpt,
     JsonOpt,
     PluginOpt,
     SeedOpt,
@@ -44,6 +46,8 @@ def diagnose_cmd(
     ] = [],  # noqa: B006
     optimizer: Annotated[str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")] = "ax",
     embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
+    embedder_frames: EmbedderFramesOpt = None,
+    duration: DurationOpt = None,
     weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
     device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
     render_set: Annotated[
@@ -110,6 +114,8 @@ def diagnose_cmd(
         effect_steps=effect_steps,
         optimizer=optimizer,
         embedder=embedder,
+        embedder_frames=embedder_frames,
+        duration_s=duration,
         weights=weights,
         device=device,
         seed=seed,

@@ -20,9 +20,15 @@ def off_values(space: ParameterSpace) -> dict[str, float]:
     return {s.name: float(s.default) if s.default is not None else float(s.bounds[0]) for s in space}
 
 
-def augmented_pipeline(base: Pipeline, effects: list[Effect]) -> Pipeline:
-    """The baseline's renderer and embedder with a simulator that has ``effects`` switched in."""
-    simulator = base.phenomenon.make_simulator(effects)
+def augmented_pipeline(base: Pipeline, effects: list[Effect], duration_s: float | None = None) -> Pipeline:
+    """The baseline's renderer and embedder with a simulator that has ``effects`` switched in.
+
+    ``duration_s`` must be the baseline's (``None``: the phenomenon's default length), so
+    that both models are compared on clips of the same length.
+    """
+    from physinfer.session import make_simulator
+
+    simulator = make_simulator(base.phenomenon, effects, duration_s)
     return Pipeline(base.phenomenon, simulator, base.renderer, base.embedder, list(effects))
 
 

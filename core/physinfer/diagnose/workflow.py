@@ -47,6 +47,7 @@ from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinemen
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RUN_FILE, RunDirectory
+from physinfer.session import clip_settings
 
 Log = Callable[[str], None]
 
@@ -66,6 +67,9 @@ class DiagnoseSettings:
         effect_steps: Budget of the control and of each augmented model (``None``: ``steps``).
         optimizer: Registered optimizer name.
         embedder: Embedder name (``None``: the phenomenon's default).
+        embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
+        duration_s: Seconds every simulation of every stage records (``None``: the
+            phenomenon's default); see :func:`physinfer.session.build_pipeline`.
         weights: Embedder weights.
         device: torch device of the embedder.
         seed: Seed of optimizers and simulations.
@@ -101,6 +105,8 @@ class DiagnoseSettings:
     effect_steps: int | None = None
     optimizer: str = "ax"
     embedder: str | None = None
+    embedder_frames: int | None = None
+    duration_s: float | None = None
     weights: Path | None = None
     device: str | None = None
     seed: int = 0
@@ -199,6 +205,7 @@ def run_stage(
         "truth": target.truth,
         "start": None if start is None else {k: float(v) for k, v in start.items()},
         "stage": name,
+        **clip_settings(settings.duration_s, settings.embedder_frames),
     }
     config = RefineConfig(
         steps=steps, optimizer=settings.optimizer, seed=seed,
@@ -212,8 +219,9 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
     from physinfer.session import build_pipeline, load_target
 
     pipeline = build_pipeline(
-        registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device
-    )
+        registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
+        duration_s=settings.duration_s, embedder_frames=settings.embedder_frames,
+    )  # fmt: skip
     target = load_target(
         pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set
     )
@@ -415,7 +423,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
     for name, effect in effect_objs.items():
         say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
-        pipeline = augmented_pipeline(base, [effect])
+        pipeline = augmented_pipeline(base, [effect], settings.duration_s)
         result = run_stage(
             f"effect-{name}",
             pipeline,
@@ -551,6 +559,7 @@ def _outputs(
         values=after.best_params,
         gap=float(after.gap.gap),
         source=after.result.run_dir,
+        **clip_settings(settings.duration_s, settings.embedder_frames),  # the clips the values were fitted on
     )
     gap_after = float(after.gap.gap)
     gap_before = float(before.gap.gap)
@@ -598,6 +607,8 @@ def _outputs(
             "calibrate": settings.calibrate,
             "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
             "calibration_control": settings.calibrate and settings.calibration_control,
+            "duration_s": settings.duration_s,
+            "embedder_frames": settings.embedder_frames,
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,

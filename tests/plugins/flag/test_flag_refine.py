@@ -107,3 +107,28 @@ def test_embedder_frames_need_a_parameter_free_embedder(tmp_path):
                            "--out", str(tmp_path / "r")], capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0 and "an SDN's are set by its weights" in " ".join(proc.stderr.split())
     assert not (tmp_path / "r").exists()
+
+
+def test_diagnose_compares_every_model_on_the_longer_clips(tmp_path):
+    """``diagnose --duration`` reaches every stage: the augmented model records as long as the baseline.
+
+    The spectral embedder reads 80 frames, so a stage simulating the default 2.4 s (60 frames)
+    would fail every trial; the effect stage's trials must all succeed.
+    """
+    target = tmp_path / "long.mp4"
+    cli("simulate", "--plugin", "flag", "--set", "wind_speed=5", "--duration", "3.2", "--seed", "2",
+        "--out", str(target), "--json")
+    out = tmp_path / "diag"
+    report = cli("diagnose", "--plugin", "flag", "--target", str(target), "--duration", "3.2", "--embedder",
+                 "spectral", "--embedder-frames", "80", "--effect", "wind_yaw", "--steps", "2", "--optimizer",
+                 "random", "--calibration-runs", "1", "--no-calibration-control", "--floor-samples", "4",
+                 "--no-video", "--out", str(out), "--json")
+    assert report["settings"]["duration_s"] == 3.2 and report["settings"]["embedder_frames"] == 80
+    (candidate,) = report["candidates"]
+    assert np.isfinite(candidate["gap"])
+    for stage in ("baseline", "calibration-0", "control", "effect-wind_yaw"):
+        run = json.loads((out / stage / "run.json").read_text())
+        assert run["duration_s"] == 3.2 and run["embedder_frames"] == 80, stage
+        assert all(t.status == "ok" for t in RunDirectory(out / stage).read_trials()), stage
+    model = json.loads((out / "model.json").read_text())
+    assert model["duration_s"] == 3.2 and model["embedder_frames"] == 80
