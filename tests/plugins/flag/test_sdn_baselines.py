@@ -53,6 +53,21 @@ def test_cnn_lstm_depends_on_frame_order_and_trains():
     assert model.features[0].weight.grad.abs().sum() > 0
 
 
+def test_cnn_lstm_names_its_smallest_input_instead_of_failing_inside_torch():
+    model = CNNLSTM(config=CNNLSTMConfig(n_frames=2, conv_widths=(4, 4, 4, 4, 4), fc_width=8, hidden=4)).eval()
+    side = CNNLSTM.min_side
+    with torch.no_grad():
+        assert model(torch.zeros(1, 2, side, side, dtype=torch.uint8)).shape == (1, 4)
+        with pytest.raises(RuntimeError):  # the constant is tight: one pixel less fails in the stack itself
+            model.features(torch.zeros(1, 1, side - 1, side - 1))
+        with pytest.raises(UserInputError, match=f"at least {side} px"):
+            model(torch.zeros(1, 2, side - 1, side - 1, dtype=torch.uint8))
+    from physinfer_flag.sdn.workflows import regression_backbone
+
+    with pytest.raises(UserInputError, match=f"at least {side} px"):
+        regression_backbone("cnn_lstm", 10, FrontEndConfig(size=48), "cpu")
+
+
 def test_learned_baselines_fine_tune_with_a_regression_head():
     train = grating_dataset(n_thetas=6, renders_per_sim=2, n_frames=4, size=64, seed=0)
     test = grating_dataset(n_thetas=3, renders_per_sim=2, n_frames=4, size=64, seed=1)

@@ -153,6 +153,9 @@ class CNNLSTM(nn.Module):
     """
 
     input_kind = "clips"
+    #: Smallest input side the AlexNet stack accepts: its stride-4 convolution and three
+    #: stride-2 poolings of width 3 leave nothing to pool below 63 px.
+    min_side = 63
 
     def __init__(self, *, config: CNNLSTMConfig | None = None) -> None:
         super().__init__()
@@ -195,6 +198,8 @@ class CNNLSTM(nn.Module):
         """Clip features ``(N, hidden)``: the LSTM's last hidden state."""
         x = _frames(video, self.config.n_frames)
         n, t, h, w = x.shape
+        if min(h, w) < self.min_side:
+            raise UserInputError(f"CNN+LSTM needs frames of at least {self.min_side} px per side, got {h}x{w}")
         per_frame = self.fc(self.features(x.reshape(n * t, 1, h, w)).flatten(1)).reshape(n, t, -1)
         _, (hidden, _) = self.lstm(per_frame)
         return hidden[-1]

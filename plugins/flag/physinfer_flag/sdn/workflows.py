@@ -206,6 +206,11 @@ def regression_backbone(
         resnet = ResNet18Frames(config=ResNetFramesConfig(n_frames=frames))
         return resnet, dataclasses.replace(frontend, n_frames=max(4, frames))
     if name == "cnn_lstm":
+        if frontend.size < CNNLSTM.min_side:
+            raise UserInputError(
+                f"the CNN+LSTM baseline needs clips of at least {CNNLSTM.min_side} px (its AlexNet strides), "
+                f"got {frontend.size}; use a larger size"
+            )
         frames = n_frames or 10
         lstm = CNNLSTM(config=CNNLSTMConfig(n_frames=frames))
         return lstm, dataclasses.replace(frontend, n_frames=max(4, frames))
