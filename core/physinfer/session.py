@@ -172,7 +172,8 @@ def refine(
     """Run or continue a refinement end to end and write every output into ``out``.
 
     ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
-    in and the refinement is warm-started from its values. ``fixed`` holds parameters at
+    in and the refinement is warm-started from its values (and, unless ``duration_s`` is
+    given, simulates clips as long as the diagnosis did). ``fixed`` holds parameters at
     given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
     (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
     step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
@@ -185,6 +186,8 @@ def refine(
 
         model_file = model_for_refine(model, plugin, effects)
         effects = model_file.effects
+        if duration_s is None:  # the clip length the model was fitted on (diagnose --duration)
+            duration_s = model_file.extra.get("duration_s")
     pipeline = build_pipeline(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
         duration_s=duration_s, embedder_frames=embedder_frames,

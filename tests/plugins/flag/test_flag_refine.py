@@ -132,3 +132,9 @@ def test_diagnose_compares_every_model_on_the_longer_clips(tmp_path):
         assert all(t.status == "ok" for t in RunDirectory(out / stage).read_trials()), stage
     model = json.loads((out / "model.json").read_text())
     assert model["duration_s"] == 3.2 and model["embedder_frames"] == 80
+    # refine --model simulates the diagnosis's clip length unless told otherwise.
+    again = tmp_path / "again"
+    data = cli("refine", "--plugin", "flag", "--model", str(out / "model.json"), "--target", str(target),
+               "--embedder", "spectral", "--embedder-frames", "80", "--steps", "1", "--noise-samples", "0",
+               "--floor-samples", "0", "--optimizer", "random", "--out", str(again), "--json")
+    assert data["n_failed"] == 0 and json.loads((again / "run.json").read_text())["duration_s"] == 3.2
