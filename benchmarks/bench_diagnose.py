@@ -158,6 +158,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             optimizer=args.optimizer,
             embedder=args.embedder,
             embedder_frames=args.embedder_frames,
+            fixed=tuple(f"{name}={truth[name]!r}" for name in args.fix_truth),
             seed=seed,
             floor_samples=args.floor_samples,
             select_top=args.select_top,
@@ -191,6 +192,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             for c in report["candidates"]
         },
         "truth": truth,
+        "fixed": report["settings"]["fixed"],
         "wall_time_s": time.perf_counter() - t0,
     }
     atomic_write_json(case_dir / "case.json", row)
@@ -300,6 +302,9 @@ def main() -> None:
                         help="flag_lite: recorded frames per clip (default 40; grid_spectrum needs 100)")
     parser.add_argument("--embedder-frames", type=int, default=None,
                         help="frames a parameter-free embedder reads (default: its own; spectral 30)")
+    parser.add_argument("--fix-truth", nargs="*", default=[], metavar="NAME",
+                        help="hold these parameters fixed at each target's true values (a user who measured "
+                             "them, e.g. the cloth's area weight)")
     parser.add_argument("--floor-samples", type=int, default=4)
     parser.add_argument("--select-top", type=int, default=0,
                         help="each stage re-simulates its best M trials and keeps the lowest mean (0: off)")

@@ -172,8 +172,9 @@ def refine(
     """Run or continue a refinement end to end and write every output into ``out``.
 
     ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
-    in and the refinement is warm-started from its values (and, unless ``duration_s`` is
-    given, simulates clips as long as the diagnosis did). ``fixed`` holds parameters at
+    in and the refinement is warm-started from its values (and, unless ``duration_s`` or
+    ``fixed`` are given, simulates clips as long as the diagnosis did and holds fixed what
+    it held fixed). ``fixed`` holds parameters at
     given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
     (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
     step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
@@ -188,6 +189,8 @@ def refine(
         effects = model_file.effects
         if duration_s is None:  # the clip length the model was fitted on (diagnose --duration)
             duration_s = model_file.extra.get("duration_s")
+        if not fixed:  # the values the diagnosis held fixed (diagnose --fix)
+            fixed = [f"{name}={value!r}" for name, value in model_file.extra.get("fixed", {}).items()]
     pipeline = build_pipeline(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
         duration_s=duration_s, embedder_frames=embedder_frames,

@@ -342,6 +342,29 @@ def test_a_duration_the_phenomenon_cannot_record_is_refused_before_anything_is_w
     assert not (tmp_path / "diag-none").exists()
 
 
+def test_fixed_parameters_stay_fixed_in_every_model_and_in_the_model_file(tmp_path: Path):
+    """``--fix``: known values are held in the baseline, the calibration runs and the augmented
+    models alike, and ``refine --model`` holds them again."""
+    from physinfer.plugins import load_registry
+    from physinfer.rundir import RunDirectory
+    from physinfer.session import refine
+
+    target = _pendulum_target(tmp_path, "quadratic_drag")
+    report = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1,
+                       calibration_control=False, fixed=("damping=0.05",))
+    assert report["settings"]["fixed"] == {"damping": 0.05}
+    out = tmp_path / "diag-quadratic_drag"
+    for stage in ("baseline", "calibration-0", "control", "effect-quadratic_drag"):
+        assert json.loads((out / stage / "run.json").read_text())["fixed"] == {"damping": 0.05}, stage
+        assert all("damping" not in t.params for t in RunDirectory(out / stage).read_trials()), stage
+    model = read_model(out / "model.json")
+    assert model.values["damping"] == 0.05 and model.extra["fixed"] == {"damping": 0.05}
+    registry, _ = load_registry()
+    refine(registry, plugin="pendulum", model=out / "model.json", target_path=target, steps=1, optimizer="random",
+           render_set={"size": 48}, noise_samples=0, floor_samples=0, out=tmp_path / "again", progress=False)
+    assert json.loads((tmp_path / "again" / "run.json").read_text())["fixed"] == {"damping": 0.05}
+
+
 @pytest.mark.slow
 def test_hidden_drag_is_named_and_the_gap_shrinks(tmp_path: Path):
     report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=16, optimizer="ax")

@@ -51,6 +51,14 @@ DurationOpt = Annotated[
         "are for an embedder that reads more frames (--embedder-frames, or an SDN trained on them).",
     ),
 ]
+FixOpt = Annotated[
+    list[str],
+    typer.Option(
+        "--fix",
+        help="Hold a parameter at a known value and leave it out of the search: NAME=VALUE, "
+        "NAME may be a pattern such as 'bend_*' (repeatable).",
+    ),
+]
 EmbedderFramesOpt = Annotated[
     int | None,
     typer.Option(
@@ -264,14 +272,7 @@ def refine_cmd(
     render_set: Annotated[
         list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
     ] = [],  # noqa: B006
-    fix: Annotated[
-        list[str],
-        typer.Option(
-            "--fix",
-            help="Hold a parameter at a known value and leave it out of the search: NAME=VALUE, "
-            "NAME may be a pattern such as 'bend_*' (repeatable).",
-        ),
-    ] = [],  # noqa: B006
+    fix: FixOpt = [],  # noqa: B006
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")] = False,

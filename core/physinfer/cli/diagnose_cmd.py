@@ -15,6 +15,7 @@ from physinfer.cli.app import (
     BatchSizeOpt,
     DurationOpt,
     EmbedderFramesOpt,
+    FixOpt,
     JsonOpt,
     PluginOpt,
     SeedOpt,
@@ -48,6 +49,7 @@ def diagnose_cmd(
     embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
     embedder_frames: EmbedderFramesOpt = None,
     duration: DurationOpt = None,
+    fix: FixOpt = [],  # noqa: B006
     weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
     device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
     render_set: Annotated[
@@ -116,6 +118,7 @@ def diagnose_cmd(
         embedder=embedder,
         embedder_frames=embedder_frames,
         duration_s=duration,
+        fixed=tuple(fix),
         weights=weights,
         device=device,
         seed=seed,

@@ -24,11 +24,16 @@ def augmented_pipeline(base: Pipeline, effects: list[Effect], duration_s: float 
     """The baseline's renderer and embedder with a simulator that has ``effects`` switched in.
 
     ``duration_s`` must be the baseline's (``None``: the phenomenon's default length), so
-    that both models are compared on clips of the same length.
+    that both models are compared on clips of the same length. Parameters the baseline holds
+    fixed (``--fix``) stay fixed at the same values.
     """
+    from physinfer.fixed import FixedParameters, split_fixed
     from physinfer.session import make_simulator
 
     simulator = make_simulator(base.phenomenon, effects, duration_s)
+    fixed = split_fixed(base.simulator)[1]
+    if fixed:
+        simulator = FixedParameters(simulator, fixed)
     return Pipeline(base.phenomenon, simulator, base.renderer, base.embedder, list(effects))
 
 

@@ -41,6 +41,7 @@ from physinfer.diagnose.gap import gap_numbers, measure_gap
 from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
+from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
@@ -70,6 +71,8 @@ class DiagnoseSettings:
         embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
         duration_s: Seconds every simulation of every stage records (``None``: the
             phenomenon's default); see :func:`physinfer.session.build_pipeline`.
+        fixed: ``NAME=VALUE`` items (patterns allowed) held fixed in every model and left
+            out of every search: values the user knows (see :mod:`physinfer.fixed`).
         weights: Embedder weights.
         device: torch device of the embedder.
         seed: Seed of optimizers and simulations.
@@ -107,6 +110,7 @@ class DiagnoseSettings:
     embedder: str | None = None
     embedder_frames: int | None = None
     duration_s: float | None = None
+    fixed: tuple[str, ...] = ()
     weights: Path | None = None
     device: str | None = None
     seed: int = 0
@@ -207,6 +211,9 @@ def run_stage(
         "stage": name,
         **clip_settings(settings.duration_s, settings.embedder_frames),
     }
+    fixed = split_fixed(pipeline.simulator)[1]
+    if fixed:  # absent when nothing is fixed, so diagnoses from before --fix still resume
+        run_info["fixed"] = fixed
     config = RefineConfig(
         steps=steps, optimizer=settings.optimizer, seed=seed,
         select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
@@ -220,7 +227,7 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
 
     pipeline = build_pipeline(
         registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
-        duration_s=settings.duration_s, embedder_frames=settings.embedder_frames,
+        duration_s=settings.duration_s, embedder_frames=settings.embedder_frames, fixed=settings.fixed,
     )  # fmt: skip
     target = load_target(
         pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set
@@ -550,16 +557,17 @@ def _outputs(
         from physinfer.video import side_by_side, write_video
 
         videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
-    space = after.pipeline.simulator.parameter_space
+    full_simulator, fixed = split_fixed(after.pipeline.simulator)
     model = write_model(
         out / "model.json",
         plugin=settings.plugin,
         effects=[e.name for e in after.pipeline.effects],
-        space=space,
-        values=after.best_params,
+        space=full_simulator.parameter_space,  # every parameter, the fixed ones at their values
+        values={**after.best_params, **fixed},
         gap=float(after.gap.gap),
         source=after.result.run_dir,
         **clip_settings(settings.duration_s, settings.embedder_frames),  # the clips the values were fitted on
+        **({"fixed": fixed} if fixed else {}),
     )
     gap_after = float(after.gap.gap)
     gap_before = float(before.gap.gap)
@@ -609,6 +617,7 @@ def _outputs(
             "calibration_control": settings.calibrate and settings.calibration_control,
             "duration_s": settings.duration_s,
             "embedder_frames": settings.embedder_frames,
+            "fixed": split_fixed(before.pipeline.simulator)[1],
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
