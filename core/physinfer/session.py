@@ -197,7 +197,8 @@ def refine(
     )  # fmt: skip
     from physinfer.fixed import split_fixed
 
-    fixed_values = split_fixed(pipeline.simulator)[1]
+    # Only what --fix holds: a phenomenon whose own simulator fixes parameters has not been told so.
+    fixed_values = split_fixed(pipeline.simulator)[1] if fixed else {}
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
         steps=budget,

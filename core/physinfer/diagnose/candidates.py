@@ -20,18 +20,19 @@ def off_values(space: ParameterSpace) -> dict[str, float]:
     return {s.name: float(s.default) if s.default is not None else float(s.bounds[0]) for s in space}
 
 
-def augmented_pipeline(base: Pipeline, effects: list[Effect], duration_s: float | None = None) -> Pipeline:
+def augmented_pipeline(
+    base: Pipeline, effects: list[Effect], duration_s: float | None = None, fixed: Mapping[str, float] | None = None
+) -> Pipeline:
     """The baseline's renderer and embedder with a simulator that has ``effects`` switched in.
 
-    ``duration_s`` must be the baseline's (``None``: the phenomenon's default length), so
-    that both models are compared on clips of the same length. Parameters the baseline holds
-    fixed (``--fix``) stay fixed at the same values.
+    ``duration_s`` and ``fixed`` must be the baseline's (its clip length, ``None`` for the
+    phenomenon's default, and the values ``--fix`` holds), so that both models are compared
+    on the same clips with the same known values.
     """
-    from physinfer.fixed import FixedParameters, split_fixed
+    from physinfer.fixed import FixedParameters
     from physinfer.session import make_simulator
 
     simulator = make_simulator(base.phenomenon, effects, duration_s)
-    fixed = split_fixed(base.simulator)[1]
     if fixed:
         simulator = FixedParameters(simulator, fixed)
     return Pipeline(base.phenomenon, simulator, base.renderer, base.embedder, list(effects))

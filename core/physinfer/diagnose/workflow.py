@@ -211,7 +211,7 @@ def run_stage(
         "stage": name,
         **clip_settings(settings.duration_s, settings.embedder_frames),
     }
-    fixed = split_fixed(pipeline.simulator)[1]
+    fixed = user_fixed(pipeline, settings)
     if fixed:  # absent when nothing is fixed, so diagnoses from before --fix still resume
         run_info["fixed"] = fixed
     config = RefineConfig(
@@ -220,6 +220,15 @@ def run_stage(
     )
     resume = run_dir.run_file.is_file()
     return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
+
+
+def user_fixed(pipeline: Pipeline, settings: DiagnoseSettings) -> dict[str, float]:
+    """The values ``--fix`` holds in ``pipeline`` (``{}`` without ``--fix``).
+
+    Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
+    parameters fixed (the benchmark's ``flag_lite``) has not had them fixed by the user.
+    """
+    return split_fixed(pipeline.simulator)[1] if settings.fixed else {}
 
 
 def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
@@ -430,7 +439,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
     for name, effect in effect_objs.items():
         say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
-        pipeline = augmented_pipeline(base, [effect], settings.duration_s)
+        pipeline = augmented_pipeline(base, [effect], settings.duration_s, user_fixed(base, settings))
         result = run_stage(
             f"effect-{name}",
             pipeline,
@@ -557,7 +566,8 @@ def _outputs(
         from physinfer.video import side_by_side, write_video
 
         videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
-    full_simulator, fixed = split_fixed(after.pipeline.simulator)
+    fixed = user_fixed(after.pipeline, settings)
+    full_simulator = split_fixed(after.pipeline.simulator)[0] if fixed else after.pipeline.simulator
     model = write_model(
         out / "model.json",
         plugin=settings.plugin,
@@ -617,7 +627,7 @@ def _outputs(
             "calibration_control": settings.calibrate and settings.calibration_control,
             "duration_s": settings.duration_s,
             "embedder_frames": settings.embedder_frames,
-            "fixed": split_fixed(before.pipeline.simulator)[1],
+            "fixed": user_fixed(before.pipeline, settings),
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
