@@ -83,3 +83,23 @@ def test_a_bad_fix_fails_before_anything_is_written(tmp_path):
     assert proc.returncode == 2
     assert "no parameter matches 'lenght'" in proc.stderr and "Traceback" not in proc.stderr
     assert not out.exists()
+
+
+def test_a_phenomenon_that_fixes_its_own_parameters_has_not_been_given_fix(tmp_path):
+    """Only ``--fix`` counts as fixed: a phenomenon whose simulator holds parameters itself
+    (the diagnose benchmark's ``flag_lite``) records no ``fixed`` (so its older runs resume)."""
+    import dataclasses
+
+    registry, _ = load_registry()
+    pendulum = registry.phenomenon("pendulum")
+    held = dataclasses.replace(
+        pendulum, name="pendulum_held", make_simulator=lambda effects=(): FixedParameters(
+            pendulum.make_simulator(effects), {"amplitude": 40.0})
+    )
+    registry.scoped("tests").add_phenomenon("pendulum_held", lambda: held, "amplitude held by the phenomenon")
+    refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
+           out=tmp_path / "own", progress=False)
+    assert "fixed" not in json.loads((tmp_path / "own" / "run.json").read_text())
+    refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
+           fixed=["length=1"], out=tmp_path / "user", progress=False)
+    assert json.loads((tmp_path / "user" / "run.json").read_text())["fixed"] == {"length": 1.0}
