@@ -27,6 +27,9 @@ Example (the numbers in docs/benchmarks.md)::
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
         --embedder spectral --render-size 112 --frames 40 --seeds 6
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py --features trajectory --frames 100
+    # 8-s clips read whole by the spectral embedder
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
+        --embedder spectral --render-size 112 --frames 200 --embedder-frames 200 --seeds 6
 """
 
 from __future__ import annotations
