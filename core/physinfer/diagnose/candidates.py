@@ -10,9 +10,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from physinfer.fixed import FixedParameters
 from physinfer.parameters import ParameterSpace
 from physinfer.refine import Pipeline
 from physinfer.roles import Effect
+from physinfer.session import make_simulator
 
 
 def off_values(space: ParameterSpace) -> dict[str, float]:
@@ -29,9 +31,6 @@ def augmented_pipeline(
     phenomenon's default, and the values ``--fix`` holds), so that both models are compared
     on the same clips with the same known values.
     """
-    from physinfer.fixed import FixedParameters
-    from physinfer.session import make_simulator
-
     simulator = make_simulator(base.phenomenon, effects, duration_s)
     if fixed:
         simulator = FixedParameters(simulator, fixed)
