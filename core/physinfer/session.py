@@ -91,18 +91,34 @@ def make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | 
     return phenomenon.make_simulator(effects, duration_s=duration_s)
 
 
-def clip_settings(duration_s: float | None, embedder_frames: int | None) -> dict[str, Any]:
-    """The ``run.json`` entries of ``--duration`` and ``--embedder-frames``: only those set.
+def optional_settings(
+    fixed: Mapping[str, float], duration_s: float | None, embedder_frames: int | None
+) -> dict[str, Any]:
+    """The ``run.json`` (and ``model.json``) entries of ``--fix``, ``--duration`` and
+    ``--embedder-frames``: only those set.
 
-    Both are resume keys; leaving an unset one out keeps runs made before the option existed
+    All are resume keys; leaving an unset one out keeps runs made before the option existed
     resumable.
     """
     settings: dict[str, Any] = {}
+    if fixed:
+        settings["fixed"] = dict(fixed)
     if duration_s is not None:
         settings["duration_s"] = duration_s
     if embedder_frames is not None:
         settings["embedder_frames"] = embedder_frames
     return settings
+
+
+def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
+    """The values ``--fix`` (``fixed``, its items) holds in ``pipeline``; ``{}`` without it.
+
+    Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
+    parameters fixed (the diagnose benchmark's ``flag_lite``) has not had them fixed by the user.
+    """
+    from physinfer.fixed import split_fixed
+
+    return split_fixed(pipeline.simulator)[1] if fixed else {}
 
 
 def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
@@ -195,10 +211,7 @@ def refine(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
         duration_s=duration_s, embedder_frames=embedder_frames,
     )  # fmt: skip
-    from physinfer.fixed import split_fixed
-
-    # Only what --fix holds: a phenomenon whose own simulator fixes parameters has not been told so.
-    fixed_values = split_fixed(pipeline.simulator)[1] if fixed else {}
+    fixed_values = fixed_by_user(pipeline, fixed)
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
         steps=budget,
@@ -233,9 +246,7 @@ def refine(
         "seeds_per_trial": seeds_per_trial,
         "batch_size": batch_size,  # informative: a resumed run may use another q
     }
-    if fixed_values:  # absent when nothing is fixed, so runs from before --fix still resume
-        run_info["fixed"] = fixed_values
-    run_info.update(clip_settings(duration_s, embedder_frames))  # absent by default too, for the same reason
+    run_info.update(optional_settings(fixed_values, duration_s, embedder_frames))
     factory = registry.get("optimizers", optimizer).load()
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory

@@ -166,7 +166,7 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
 
     def _simulator_for(self, clip: ClipFormat) -> Simulator:
         """The simulator that records at least ``clip``'s duration where the phenomenon allows."""
-        if not accepts_duration(self.record.make_simulator):
+        if not accepts_keyword(self.record.make_simulator, "duration_s"):
             return self.simulator
         duration = clip.n_frames / clip.fps
         if self._simulator is None or self._simulator_duration != duration:
@@ -187,11 +187,6 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def accepts_duration(make_simulator: Any) -> bool:
-    """Whether a ``make_simulator`` factory takes the ``duration_s`` keyword."""
-    return accepts_keyword(make_simulator, "duration_s")
 
 
 def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> DatasetGenerator:

@@ -48,7 +48,7 @@ from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinemen
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RUN_FILE, RunDirectory
-from physinfer.session import clip_settings
+from physinfer.session import fixed_by_user, optional_settings
 
 Log = Callable[[str], None]
 
@@ -209,26 +209,14 @@ def run_stage(
         "truth": target.truth,
         "start": None if start is None else {k: float(v) for k, v in start.items()},
         "stage": name,
-        **clip_settings(settings.duration_s, settings.embedder_frames),
+        **optional_settings(fixed_by_user(pipeline, settings.fixed), settings.duration_s, settings.embedder_frames),
     }
-    fixed = user_fixed(pipeline, settings)
-    if fixed:  # absent when nothing is fixed, so diagnoses from before --fix still resume
-        run_info["fixed"] = fixed
     config = RefineConfig(
         steps=steps, optimizer=settings.optimizer, seed=seed,
         select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
     )
     resume = run_dir.run_file.is_file()
     return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
-
-
-def user_fixed(pipeline: Pipeline, settings: DiagnoseSettings) -> dict[str, float]:
-    """The values ``--fix`` holds in ``pipeline`` (``{}`` without ``--fix``).
-
-    Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
-    parameters fixed (the benchmark's ``flag_lite``) has not had them fixed by the user.
-    """
-    return split_fixed(pipeline.simulator)[1] if settings.fixed else {}
 
 
 def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
@@ -439,7 +427,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
     for name, effect in effect_objs.items():
         say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
-        pipeline = augmented_pipeline(base, [effect], settings.duration_s, user_fixed(base, settings))
+        pipeline = augmented_pipeline(base, [effect], settings.duration_s, fixed_by_user(base, settings.fixed))
         result = run_stage(
             f"effect-{name}",
             pipeline,
@@ -566,7 +554,7 @@ def _outputs(
         from physinfer.video import side_by_side, write_video
 
         videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
-    fixed = user_fixed(after.pipeline, settings)
+    fixed = fixed_by_user(after.pipeline, settings.fixed)
     full_simulator = split_fixed(after.pipeline.simulator)[0] if fixed else after.pipeline.simulator
     model = write_model(
         out / "model.json",
@@ -576,8 +564,7 @@ def _outputs(
         values={**after.best_params, **fixed},
         gap=float(after.gap.gap),
         source=after.result.run_dir,
-        **clip_settings(settings.duration_s, settings.embedder_frames),  # the clips the values were fitted on
-        **({"fixed": fixed} if fixed else {}),
+        **optional_settings(fixed, settings.duration_s, settings.embedder_frames),  # what the values were fitted under
     )
     gap_after = float(after.gap.gap)
     gap_before = float(before.gap.gap)
@@ -627,7 +614,7 @@ def _outputs(
             "calibration_control": settings.calibrate and settings.calibration_control,
             "duration_s": settings.duration_s,
             "embedder_frames": settings.embedder_frames,
-            "fixed": user_fixed(before.pipeline, settings),
+            "fixed": fixed_by_user(before.pipeline, settings.fixed),
             "rule": {
                 "misspecified_factor": settings.rule.misspecified_factor,
                 "alpha": settings.rule.alpha,
