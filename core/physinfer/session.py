@@ -121,11 +121,16 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
     return split_fixed(pipeline.simulator)[1] if fixed else {}
 
 
-def full_parameter_space(pipeline: Pipeline) -> ParameterSpace:
-    """Every parameter of the pipeline's simulator, fixed ones included."""
+def full_parameter_space(pipeline: Pipeline, fixed: Sequence[str]) -> ParameterSpace:
+    """Every parameter of the pipeline's model, those ``--fix`` (``fixed``, its items) holds included.
+
+    Only ``--fix``'s wrapper is looked through: parameters a phenomenon's own simulator
+    holds fixed (the diagnose benchmark's ``flag_lite``) are not part of its model, so
+    they are neither in a model file nor accepted by ``--truth``.
+    """
     from physinfer.fixed import split_fixed
 
-    return split_fixed(pipeline.simulator)[0].parameter_space
+    return (split_fixed(pipeline.simulator)[0] if fixed else pipeline.simulator).parameter_space
 
 
 def load_target(
@@ -135,10 +140,14 @@ def load_target(
     fps: float | None,
     truth: Sequence[str],
     render_set: Mapping[str, Any],
+    fixed: Sequence[str] = (),
 ) -> Target:
-    """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target."""
+    """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target.
+
+    ``fixed``: ``--fix``'s items (their parameters may have a ``--truth`` too).
+    """
     truth_values = parse_float_assignments(truth, "--truth")
-    space = full_parameter_space(pipeline)
+    space = full_parameter_space(pipeline, fixed)
     for name in truth_values:
         space[name]  # unknown names fail with the list of known ones
     if target_path is None:
@@ -225,7 +234,7 @@ def refine(
         batch_size=batch_size,
     )
     config.validate()
-    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {})
+    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
     run_dir = RunDirectory(out)
     if resume:
         stored = run_dir.load_run_info()
@@ -252,7 +261,7 @@ def refine(
         from physinfer.diagnose.warmstart import warm_start_factory
 
         space = pipeline.simulator.parameter_space
-        start = model_file.start_for(full_parameter_space(pipeline))  # fixed parameters dropped below
+        start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
         factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
     from physinfer.trial_workers import PipelineSpec, trial_workers
 

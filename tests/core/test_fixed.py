@@ -85,21 +85,53 @@ def test_a_bad_fix_fails_before_anything_is_written(tmp_path):
     assert not out.exists()
 
 
-def test_a_phenomenon_that_fixes_its_own_parameters_has_not_been_given_fix(tmp_path):
-    """Only ``--fix`` counts as fixed: a phenomenon whose simulator holds parameters itself
-    (the diagnose benchmark's ``flag_lite``) records no ``fixed`` (so its older runs resume)."""
+def _registry_with_a_self_fixing_pendulum():
+    """The installed plugins plus ``pendulum_held``: the pendulum whose own simulator holds
+    the amplitude at 40° (as the diagnose benchmark's ``flag_lite`` holds its bending)."""
     import dataclasses
 
     registry, _ = load_registry()
     pendulum = registry.phenomenon("pendulum")
+
+    def make(effects=()):
+        return FixedParameters(pendulum.make_simulator(effects), {"amplitude": 40.0})
+
     held = dataclasses.replace(
-        pendulum, name="pendulum_held", make_simulator=lambda effects=(): FixedParameters(
-            pendulum.make_simulator(effects), {"amplitude": 40.0})
+        pendulum, name="pendulum_held", parameter_space=make().parameter_space, make_simulator=make
     )
     registry.scoped("tests").add_phenomenon("pendulum_held", lambda: held, "amplitude held by the phenomenon")
+    return registry, held
+
+
+def test_a_phenomenon_that_fixes_its_own_parameters_has_not_been_given_fix(tmp_path):
+    """Only ``--fix`` counts as fixed: a phenomenon whose simulator holds parameters itself
+    (the diagnose benchmark's ``flag_lite``) records no ``fixed`` (so its older runs resume)."""
+    registry, _ = _registry_with_a_self_fixing_pendulum()
     refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
            out=tmp_path / "own", progress=False)
     assert "fixed" not in json.loads((tmp_path / "own" / "run.json").read_text())
     refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
            fixed=["length=1"], out=tmp_path / "user", progress=False)
     assert json.loads((tmp_path / "user" / "run.json").read_text())["fixed"] == {"length": 1.0}
+
+
+def test_a_self_fixing_phenomenon_s_model_file_and_truth_use_its_own_space(tmp_path):
+    """``refine --model`` on a model file of a phenomenon that holds parameters itself, and
+    ``--truth``: its held parameters are not model parameters (they were looked through as
+    if ``--fix`` had held them, so the file reported a mismatch and ``--truth`` took them)."""
+    from physinfer.diagnose.model import write_model
+
+    registry, held = _registry_with_a_self_fixing_pendulum()
+    space = held.parameter_space
+    assert "amplitude" not in space.names
+    values = space.from_unit(np.full(len(space), 0.5))
+    write_model(tmp_path / "model.json", plugin="pendulum_held", effects=[], space=space, values=values)
+    result = refine(registry, plugin="pendulum_held", model=tmp_path / "model.json", steps=2, optimizer="random",
+                    noise_samples=0, floor_samples=0, out=tmp_path / "run", truth=["length=1"], progress=False)
+    assert set(result.best_params) == set(space.names)
+    with pytest.raises(UserInputError, match="amplitude"):
+        refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
+               out=tmp_path / "truth", truth=["amplitude=40"], progress=False)
+    # with --fix, the held parameter may have a --truth (it is the user's model parameter)
+    refine(registry, plugin="pendulum_held", steps=2, optimizer="random", noise_samples=0, floor_samples=0,
+           fixed=["length=1"], out=tmp_path / "fixed", truth=["length=1"], progress=False)

@@ -41,14 +41,13 @@ from physinfer.diagnose.gap import gap_numbers, measure_gap
 from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
-from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RUN_FILE, RunDirectory
-from physinfer.session import fixed_by_user, optional_settings
+from physinfer.session import fixed_by_user, full_parameter_space, optional_settings
 
 Log = Callable[[str], None]
 
@@ -227,7 +226,8 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
         duration_s=settings.duration_s, embedder_frames=settings.embedder_frames, fixed=settings.fixed,
     )  # fmt: skip
     target = load_target(
-        pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set
+        pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
+        fixed=settings.fixed,
     )
     return pipeline, target
 
@@ -555,12 +555,11 @@ def _outputs(
 
         videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
     fixed = fixed_by_user(after.pipeline, settings.fixed)
-    full_simulator = split_fixed(after.pipeline.simulator)[0] if fixed else after.pipeline.simulator
     model = write_model(
         out / "model.json",
         plugin=settings.plugin,
         effects=[e.name for e in after.pipeline.effects],
-        space=full_simulator.parameter_space,  # every parameter, the fixed ones at their values
+        space=full_parameter_space(after.pipeline, settings.fixed),  # every parameter, the fixed ones at their values
         values={**after.best_params, **fixed},
         gap=float(after.gap.gap),
         source=after.result.run_dir,
