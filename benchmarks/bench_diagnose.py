@@ -158,6 +158,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             optimizer=args.optimizer,
             embedder=args.embedder,
             embedder_frames=args.embedder_frames,
+            effects=tuple(args.candidates or ()),
             fixed=tuple(f"{name}={truth[name]!r}" for name in args.fix_truth),
             seed=seed,
             floor_samples=args.floor_samples,
@@ -291,6 +292,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--plugin", default="pendulum")
     parser.add_argument("--effects", nargs="*", default=None, help="hidden effects (default: all of the plugin's)")
+    parser.add_argument("--candidates", nargs="*", default=None, metavar="EFFECT",
+                        help="effects each diagnosis tries (default: all of the plugin's)")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=16)

@@ -6,13 +6,15 @@ strengths), a target is simulated with the effect on (seed 1000); ``K`` re-simul
 distances to the target compared (medians and a one-sided Mann–Whitney p that "on" is
 closer). When "off" is not farther than "on", the seed noise hides the effect from the
 embedder even at the true base parameters, and no optimizer budget can make the
-discrepancy workflow name it. Each row also gives the **energy score** of either side,
+discrepancy workflow name it. ``--targets N`` repeats the comparison against N targets
+(seeds 1000, 1001, ...; the same re-simulations) and gives the share of targets whose test
+says "on" at p < 0.05: one clip is one draw of a random effect such as gusts. Each row also gives the **energy score** of either side,
 ``mean |x_i - y| - mean_{i≠j} |x_i - x_j| / 2`` (a strictly proper score of a predictive
 distribution: it rewards a model whose re-simulations spread like the target's does, so a
 random forcing such as gusts is not penalised for its spread) and a rank test on its
 per-re-simulation terms. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
 bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p, energy_on,
-energy_off, p_energy_on_lower).
+energy_off, p_energy_on_lower, norm_on, norm_off, p_norm_on_greater).
 
 ``--features`` asks whether anything could see the effect: ``embedder`` (default) uses the
 embedder; ``localisation`` the diagnosis's own localisation statistics (log band power and
@@ -21,6 +23,15 @@ log motion envelope per region, amplitude non-stationarity; :mod:`physinfer.diag
 position and standard deviation over the clip) — if that cannot tell "off" from "on", no
 video feature can. ``mean_image`` is the clip's time-averaged
 grayscale image at 16×16 (the mean shape, which the spectral embedders discard).
+``slow_pose`` asks whether the *slow* motion carries an effect: the flag's mean position
+(the centroid of its vertices, x and z) averaged over 1-s windows, and the standard
+deviation of those window means — how much the whole flag lifts, droops and stretches
+from one second to the next. Gusts make it breathe so; the flapping averages out.
+``slow_image`` is the same question asked of the video: the 1-s window means of the
+clip's gray image on a 4×4 grid of cells, and their standard deviation per cell.
+Every row also gives the **size** of each side's feature vectors (``norm_on``,
+``norm_off``, medians, and a rank test that "on" is larger): for the ``slow_*`` features
+that is the amount of slow motion, whatever the target's own draw of it.
 
 Example (the numbers in docs/benchmarks.md)::
 
@@ -30,6 +41,13 @@ Example (the numbers in docs/benchmarks.md)::
     # 8-s clips read whole by the spectral embedder
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
         --embedder spectral --render-size 112 --frames 200 --embedder-frames 200 --seeds 6
+    # the slow breathing of the flag that gusts cause, on the vertices and in the video
+    .venv/bin/python benchmarks/bench_effect_visibility.py --features slow_pose --frames 200 --seeds 16
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py \\
+        --features slow_image --frames 200 --seeds 16 --effects wind_gusts
+    # how often one 16-s clip tells gusts from a steady wind (eight targets)
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_effect_visibility.py --embedder spectral \\
+        --frames 400 --embedder-frames 400 --seeds 16 --targets 8 --effects wind_gusts
 """
 
 from __future__ import annotations
@@ -66,6 +84,30 @@ def trajectory_features(vertices: np.ndarray) -> np.ndarray:
     return np.concatenate([v.mean(axis=0).ravel(), v.std(axis=0).ravel()])
 
 
+def window_means(series: np.ndarray, fps: float, window_s: float = 1.0) -> np.ndarray:
+    """``(T, ...)`` → ``(W, ...)``: means over consecutive ``window_s`` windows (a partial last one dropped)."""
+    width = max(1, int(round(window_s * fps)))
+    n = len(series) // width
+    if n < 2:
+        raise SystemExit(f"slow features need at least two {window_s:g}-s windows; raise --frames")
+    return series[: n * width].reshape(n, width, *series.shape[1:]).mean(axis=1)
+
+
+def slow_pose_features(vertices: np.ndarray, fps: float) -> np.ndarray:
+    """Standard deviation over 1-s windows of the window-mean centroid x and z (metres)."""
+    centroid = np.asarray(vertices, dtype=np.float64).mean(axis=1)
+    return window_means(centroid[:, [0, 2]], fps).std(axis=0)
+
+
+def slow_image_features(clip: Any) -> np.ndarray:
+    """Standard deviation over 1-s windows of the window-mean gray level of 4×4 cells (×100)."""
+    from physinfer.video import prepare_for_embedding
+
+    video = prepare_for_embedding(clip, fps=25.0, n_frames=len(clip.frames), size=64)
+    cells = np.asarray(video, dtype=np.float64).reshape(len(video), 4, 16, 4, 16).mean(axis=(2, 4))
+    return window_means(cells, 25.0).std(axis=0).ravel() * 100.0
+
+
 def localisation_features(clip: Any) -> np.ndarray:
     """The localisation statistics of a clip as one vector (log band power and log motion
     envelope per region, amplitude non-stationarity per region)."""
@@ -94,7 +136,11 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         trajectory = pipeline.simulator.simulate(params, seed=seed)
         if args.features == "trajectory":
             return trajectory_features(trajectory.vertices)
+        if args.features == "slow_pose":
+            return slow_pose_features(trajectory.vertices, trajectory.fps)
         clip = pipeline.renderer.render(trajectory, zeta)
+        if args.features == "slow_image":
+            return slow_image_features(clip)
         if args.features == "mean_image":
             from physinfer.video import prepare_for_embedding
 
@@ -105,16 +151,33 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
     t0 = time.perf_counter()
     strength = {**mid_strength(effect), **{k: v for k, v in args.strength.items() if k in OFF[effect]}}
     on, off = {**theta, **strength}, {**theta, **OFF[effect]}
-    target = embed(on, 1000)
+    targets = [embed(on, 1000 + t) for t in range(args.targets)]
     x_on = np.stack([embed(on, s) for s in range(1, args.seeds + 1)])
     x_off = np.stack([embed(off, s) for s in range(1, args.seeds + 1)])
     pipeline.renderer.close()
+    n_on, n_off = np.linalg.norm(x_on, axis=1), np.linalg.norm(x_off, axis=1)
+    row = {"wind": wind, "effect": effect, "strength": strength, **target_comparison(x_on, x_off, targets[0])}
+    if args.targets > 1:  # how often one clip tells "on" from "off": every target's own test
+        each = [target_comparison(x_on, x_off, target) for target in targets]
+        row["share_on_closer"] = float(np.mean([c["p_on_closer"] < 0.05 for c in each]))
+        row["share_energy_on_lower"] = float(np.mean([c["p_energy_on_lower"] < 0.05 for c in each]))
+        row["per_target"] = each
+    return {
+        **row,
+        "norm_on": float(np.median(n_on)),
+        "norm_off": float(np.median(n_off)),
+        "p_norm_on_greater": rank_test_less((-n_on).tolist(), (-n_off).tolist()),
+        "wall_time_s": time.perf_counter() - t0,
+    }
+
+
+def target_comparison(x_on: np.ndarray, x_off: np.ndarray, target: np.ndarray) -> dict[str, float]:
+    """Distances and energy scores of the "on" and "off" re-simulations against one target."""
+    from physinfer.diagnose.decide import rank_test_less
+
     d_on, d_off = np.linalg.norm(x_on - target, axis=1), np.linalg.norm(x_off - target, axis=1)
     s_on, s_off = energy_scores(x_on, target), energy_scores(x_off, target)
     return {
-        "wind": wind,
-        "effect": effect,
-        "strength": strength,
         "on": float(np.median(d_on)),
         "off": float(np.median(d_off)),
         "off_over_on": float(np.median(d_off) / np.median(d_on)),
@@ -123,7 +186,6 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         "energy_off": float(s_off.mean()),
         "energy_off_over_on": float(s_off.mean() / s_on.mean()),
         "p_energy_on_lower": rank_test_less(s_on.tolist(), s_off.tolist()),
-        "wall_time_s": time.perf_counter() - t0,
     }
 
 
@@ -143,10 +205,13 @@ def main() -> None:
                         help="frames a parameter-free embedder reads (default: its own; spectral 30)")
     parser.add_argument("--winds", default="3,6", help="wind speeds in m/s, comma-separated")
     parser.add_argument("--seeds", type=int, default=6, help="K re-simulations per side")
+    parser.add_argument("--targets", type=int, default=1,
+                        help="targets with the effect on (seeds 1000, 1001, ...); with more than one, each row "
+                             "adds per_target and the share of targets whose test says 'on' (p < 0.05)")
     parser.add_argument("--strength", action="append", default=[], metavar="NAME=VALUE",
                         help="an effect parameter's value instead of the middle of the realistic range (repeatable)")
     parser.add_argument("--effects", default=",".join(OFF), help="effects to test, comma-separated")
-    parser.add_argument("--features", choices=("embedder", "localisation", "trajectory", "mean_image"), default="embedder",
+    parser.add_argument("--features", choices=("embedder", "localisation", "trajectory", "mean_image", "slow_pose", "slow_image"), default="embedder",
                         help="what compares the clips (see the module docstring)")
     args = parser.parse_args()
     from physinfer.parameters import parse_float_assignments
