@@ -172,6 +172,24 @@ class ParameterSpace:
         """Each parameter at its default value."""
         return {s.name: s.default_value for s in self.specs}
 
+    def at_bounds(self, params: Mapping[str, float], tolerance: float = 1e-3) -> dict[str, str]:
+        """The parameters of ``params`` on a bound of the space: ``{name: "lower" | "upper"}``.
+
+        A fit that ends on a bound may have been stopped by it: the truth can lie beyond.
+        A bound that is also the parameter's explicit default is skipped — an effect is
+        switched off there (a gust intensity of 0), so ending on it is an answer, not a limit.
+        ``tolerance`` is a share of the (normalised) range.
+        """
+        found = {}
+        for spec in self.specs:
+            if spec.name not in params:
+                continue
+            u = float(spec.to_unit(params[spec.name]))
+            for side, edge, bound in (("lower", -1.0, spec.bounds[0]), ("upper", 1.0, spec.bounds[1])):
+                if abs(u - edge) <= 2.0 * tolerance and spec.default != bound:
+                    found[spec.name] = side
+        return found
+
     def complete(self, partial: Mapping[str, float]) -> dict[str, float]:
         """Check ``partial`` (names and bounds) and fill the rest with defaults.
 

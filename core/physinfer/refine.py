@@ -529,6 +529,7 @@ def _run_refinement(
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem
+    result.extra["at_bounds"] = space.at_bounds(result.best_params)
     if selection is not None:
         result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
     if config.floor_samples:

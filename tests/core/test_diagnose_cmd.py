@@ -66,3 +66,24 @@ def test_diagnose_refuses_zero_calibration_runs(tmp_path: Path):
     proc = _run("diagnose", "--plugin", "pendulum", "--calibration-runs", "0", "--out", str(tmp_path / "d"), "--json")
     assert proc.returncode == 2
     assert "--calibration-runs must be at least 1" in json.loads(proc.stdout)["error"]
+
+
+def test_refine_reports_a_fit_that_ended_on_a_bound(tmp_path: Path):
+    """A one-step refinement warm-started on the length's upper bound ends there: result.json
+    and the printed result say so (a fit stopped by its search range is not an answer)."""
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps({
+        "format": "physinfer-model/1", "plugin": "pendulum", "effects": [],
+        "parameters": [{"name": "length", "bounds": [0.4, 1.6]}, {"name": "damping", "bounds": [0.0, 0.6]},
+                       {"name": "amplitude", "bounds": [10.0, 60.0]}],
+        "values": {"length": 1.6, "damping": 0.2, "amplitude": 30.0},
+    }))
+    run_dir = tmp_path / "run"
+    proc = _run("refine", "--plugin", "pendulum", "--model", str(model), "--steps", "1", "--optimizer", "random",
+                "--render-set", "size=48", "--noise-samples", "0", "--floor-samples", "0", "--out", str(run_dir))
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((run_dir / "result.json").read_text())["at_bounds"] == {"length": "upper"}
+    length_line = next(line for line in proc.stderr.splitlines() if line.startswith("  length = 1.6"))
+    assert length_line.endswith("(at its upper bound)")
+    assert not any("damping" in line and "bound" in line for line in proc.stderr.splitlines())
+    assert "length ended on a bound of the search range" in proc.stderr

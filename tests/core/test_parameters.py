@@ -50,3 +50,19 @@ def test_parse_assignments_errors():
         parse_float_assignments(["a"])
     with pytest.raises(UserInputError, match="not a number"):
         parse_float_assignments(["a=x"])
+
+
+def test_at_bounds_names_the_side_in_linear_and_log_ranges_and_skips_an_off_default():
+    space = ParameterSpace(
+        [
+            ParameterSpec("speed", (1.0, 10.0)),
+            ParameterSpec("weight", (0.01, 1.0), scaling="log"),
+            ParameterSpec("intensity", (0.0, 0.5), default=0.0),  # an effect, off at its lower bound
+        ]
+    )
+    assert space.at_bounds({"speed": 10.0, "weight": 0.01, "intensity": 0.5}) == {
+        "speed": "upper", "weight": "lower", "intensity": "upper"
+    }
+    assert space.at_bounds({"speed": 9.995, "weight": 0.01002, "intensity": 0.0}) == {"speed": "upper", "weight": "lower"}
+    assert space.at_bounds({"speed": 9.9, "weight": 0.02, "intensity": 0.25}) == {}
+    assert space.at_bounds({"speed": 1.0}) == {"speed": "lower"}, "parameters not given are not checked"

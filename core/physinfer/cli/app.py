@@ -361,13 +361,22 @@ def refine_cmd(
         emit_json(summary)
         return
     err_console.print(f"[bold]best distance[/] {result.best_distance:.4g} at step {result.best_step}")
+    at_bounds = result.extra.get("at_bounds", {})
     for name, value in result.best_params.items():
         line = f"  {name} = {value:.4g}"
         if result.abs_errors and name in result.abs_errors:
             line += f"   (truth {result.ground_truth[name]:.4g}, error {result.abs_errors[name]:.3g})"
+        if name in at_bounds:
+            line += f"   (at its {at_bounds[name]} bound)"
         err_console.print(line, highlight=False)
     for name, value in result.extra.get("fixed", {}).items():
         err_console.print(f"  {name} = {value:.4g}   (fixed)", highlight=False)
+    if at_bounds:
+        err_console.print(
+            f"{', '.join(at_bounds)} ended on a bound of the search range: the truth may lie beyond it, "
+            "or another parameter is compensating for something the model lacks (`physinfer diagnose`).",
+            highlight=False,
+        )
     hint = noise_ratio_hint((result.extra.get("noise_floor") or {}).get("ratio"))
     if hint:
         err_console.print(hint, highlight=False)

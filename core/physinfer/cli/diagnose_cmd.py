@@ -144,7 +144,9 @@ def diagnose_cmd(
     )
     for c in report["candidates"]:
         mark = "[green]significant[/]" if c["significant"] else "not significant"
+        bounds = "".join(f", {name} at its {side} bound" for name, side in c.get("at_bounds", {}).items())
         err_console.print(
-            f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}", highlight=False
+            f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}{bounds}",
+            highlight=False,
         )
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)

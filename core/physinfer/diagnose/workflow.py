@@ -483,6 +483,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
                 **decision,
                 "best_params": stage.result.best_params,
                 "effect_params": {k: stage.result.best_params[k] for k in effect_objs[stage.label].parameter_space.names},
+                "at_bounds": stage.result.extra.get("at_bounds", {}),
                 "distances": list(stage.gap.to_target or []),
                 "floor": stage.gap.floor,
                 "run_dir": stage.result.run_dir,
