@@ -14,7 +14,8 @@ distribution: it rewards a model whose re-simulations spread like the target's d
 random forcing such as gusts is not penalised for its spread) and a rank test on its
 per-re-simulation terms. Runs on the diagnose benchmark's ``flag_lite`` (16×11 grid,
 bending at 1×). Prints one JSON object: ``rows`` (wind, effect, on, off, p, energy_on,
-energy_off, p_energy_on_lower, norm_on, norm_off, p_norm_on_greater).
+energy_off, p_energy_on_lower, norm_on, norm_off, p_norm_on_greater; with ``--targets`` > 1
+also share_on_closer, share_energy_on_lower and per_target).
 
 ``--features`` asks whether anything could see the effect: ``embedder`` (default) uses the
 embedder; ``localisation`` the diagnosis's own localisation statistics (log band power and
