@@ -65,6 +65,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import bench_diagnose  # noqa: E402  (the flag_lite phenomenon and the realistic strengths)
 
+from physinfer.diagnose.decide import rank_test_less  # noqa: E402
+
 #: Each effect switched off (its parameters' off values; the gusts' time scale is moot then).
 OFF: dict[str, dict[str, float]] = {
     "wind_gusts": {"gust_intensity": 0.0, "gust_timescale": 0.7},
@@ -100,13 +102,23 @@ def slow_pose_features(vertices: np.ndarray, fps: float) -> np.ndarray:
     return window_means(centroid[:, [0, 2]], fps).std(axis=0)
 
 
-def slow_image_features(clip: Any) -> np.ndarray:
-    """Standard deviation over 1-s windows of the window-mean gray level of 4×4 cells (×100)."""
+def gray_cells(clip: Any, cells: int) -> np.ndarray:
+    """``(T, cells, cells)``: the clip's gray level (64 px, 25 fps, ×100) averaged over square cells."""
     from physinfer.video import prepare_for_embedding
 
-    video = prepare_for_embedding(clip, fps=25.0, n_frames=len(clip.frames), size=64)
-    cells = np.asarray(video, dtype=np.float64).reshape(len(video), 4, 16, 4, 16).mean(axis=(2, 4))
-    return window_means(cells, 25.0).std(axis=0).ravel() * 100.0
+    video = np.asarray(prepare_for_embedding(clip, fps=25.0, n_frames=len(clip.frames), size=64), dtype=np.float64)
+    side = 64 // cells
+    return video.reshape(len(video), cells, side, cells, side).mean(axis=(2, 4)) * 100.0
+
+
+def mean_image_features(clip: Any) -> np.ndarray:
+    """The time-averaged gray image on a 16×16 grid (the mean shape)."""
+    return gray_cells(clip, 16).mean(axis=0).ravel()
+
+
+def slow_image_features(clip: Any) -> np.ndarray:
+    """Standard deviation over 1-s windows of the window-mean gray level of 4×4 cells."""
+    return window_means(gray_cells(clip, 4), 25.0).std(axis=0).ravel()
 
 
 def localisation_features(clip: Any) -> np.ndarray:
@@ -122,7 +134,6 @@ def localisation_features(clip: Any) -> np.ndarray:
 
 def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace) -> dict[str, Any]:
     """Distances to an effect-on target from ``K`` re-simulations with the effect on and off."""
-    from physinfer.diagnose.decide import rank_test_less
     from physinfer.session import build_pipeline
 
     embedder = args.embedder if args.features == "embedder" else ""
@@ -143,10 +154,7 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
         if args.features == "slow_image":
             return slow_image_features(clip)
         if args.features == "mean_image":
-            from physinfer.video import prepare_for_embedding
-
-            video = prepare_for_embedding(clip, fps=25.0, n_frames=len(clip.frames), size=64)
-            return video.mean(axis=0).reshape(16, 4, 16, 4).mean(axis=(1, 3)).ravel() * 100.0
+            return mean_image_features(clip)
         return localisation_features(clip) if args.features == "localisation" else pipeline.embedder.embed(clip)
 
     t0 = time.perf_counter()
@@ -157,9 +165,9 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
     x_off = np.stack([embed(off, s) for s in range(1, args.seeds + 1)])
     pipeline.renderer.close()
     n_on, n_off = np.linalg.norm(x_on, axis=1), np.linalg.norm(x_off, axis=1)
-    row = {"wind": wind, "effect": effect, "strength": strength, **target_comparison(x_on, x_off, targets[0])}
+    each = [target_comparison(x_on, x_off, target) for target in targets]
+    row = {"wind": wind, "effect": effect, "strength": strength, **each[0]}
     if args.targets > 1:  # how often one clip tells "on" from "off": every target's own test
-        each = [target_comparison(x_on, x_off, target) for target in targets]
         row["share_on_closer"] = float(np.mean([c["p_on_closer"] < 0.05 for c in each]))
         row["share_energy_on_lower"] = float(np.mean([c["p_energy_on_lower"] < 0.05 for c in each]))
         row["per_target"] = each
@@ -174,8 +182,6 @@ def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace
 
 def target_comparison(x_on: np.ndarray, x_off: np.ndarray, target: np.ndarray) -> dict[str, float]:
     """Distances and energy scores of the "on" and "off" re-simulations against one target."""
-    from physinfer.diagnose.decide import rank_test_less
-
     d_on, d_off = np.linalg.norm(x_on - target, axis=1), np.linalg.norm(x_off - target, axis=1)
     s_on, s_off = energy_scores(x_on, target), energy_scores(x_off, target)
     return {
