@@ -25,6 +25,30 @@ def test_optimizer_improves_on_the_centre(name, budget):
     assert best < 0.5 * quadratic(np.zeros(2))
 
 
+def test_cma_replays_several_generations_and_continues_as_the_uninterrupted_run():
+    """A resumed run attaches and tells its logged trials without asking (pycma refused a
+    second generation told that way); the next proposals are the uninterrupted run's."""
+    registry, _ = load_registry()
+
+    def run(replayed: list, fresh: int) -> list:
+        # pycma draws from numpy's global generator, seeded when a strategy is made: one at a time.
+        opt = registry.optimizer("cma", dim=3, seed=2)
+        for x in replayed:
+            trial = opt.attach(x)
+            opt.tell(trial.index, quadratic(x))
+        xs = []
+        for _ in range(fresh):
+            trial = opt.ask(1)[0]
+            opt.tell(trial.index, quadratic(trial.x))
+            xs.append(trial.x)
+        return xs
+
+    start = np.zeros(3)  # a warm start, as a diagnosis's augmented stages have
+    uninterrupted = run([start], 28)  # four generations of pycma's default 7
+    resumed = run([start, *uninterrupted[:20]], 8)
+    np.testing.assert_array_equal(np.array(resumed), np.array(uninterrupted[20:]))
+
+
 def test_random_is_reproducible_per_index():
     registry, _ = load_registry()
     a = registry.optimizer("random", dim=3, seed=5)

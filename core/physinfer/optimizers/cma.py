@@ -2,6 +2,11 @@
 
 CMA-ES needs a value for every member of a generation, so a failed trial is told as
 a penalty (the worst value seen, times two, plus one) rather than dropped.
+
+A resumed run replays its logged trials through ``attach``/``tell`` without asking, but
+pycma accepts one ``tell`` per ``ask``: a generation told without an ask since the last
+one first draws (and drops) the ask the original run made, so the strategy's random
+stream and state are those of the run that was interrupted.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ class CMAOptimizer(Optimizer):
         self._points: dict[int, np.ndarray] = {}
         self._done: dict[int, float | None] = {}
         self._worst = 0.0
+        self._asked = False  # pycma's ask since its last tell
 
     def _full(self, x: np.ndarray) -> np.ndarray:
         return x if self.dim > 1 else np.append(x, 0.0)
@@ -61,6 +67,7 @@ class CMAOptimizer(Optimizer):
         for _ in range(n):
             if not self._queue:
                 self._queue = list(self._es.ask())
+                self._asked = True
             trials.append(self._new(self._queue.pop(0)))
         return trials
 
@@ -77,5 +84,8 @@ class CMAOptimizer(Optimizer):
             xs = [self._points.pop(i) for i in ids]
             fs = [self._done.pop(i) for i in ids]
             fs = [2 * self._worst + 1 if f is None else f for f in fs]
+            if not self._asked:  # a replayed generation: the original run asked for it
+                self._es.ask()
             self._es.tell(xs, fs)
+            self._asked = False
             self._queue = []  # the distribution moved: old proposals are stale
