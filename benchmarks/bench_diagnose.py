@@ -175,6 +175,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         "seed": seed,
         "named": report["named_effect"],
         "misspecified": report["misspecified"],
+        "misspecified_by": report["misspecified_by"],
         "gap_before": report["gap_before"],
         "gap_after": report["gap_after"],
         "gap_ratio": report["gap_ratio"],
@@ -201,24 +202,28 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
 
 
 def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, dict[str, Any]]:
-    """The case's decisions under three calibrations, recomputed from its stored gaps.
+    """The case's decisions under earlier calibrations and rules, recomputed from its stored gaps.
 
     The decisions are functions of the measured gaps, so one finished diagnosis (with
     ``calibration-<r>/`` and ``calibration-<r>-control/`` stages) answers what a single
-    calibration run (``R1``, run 0 — the earlier default), the median of the runs without
+    calibration run (``R1``, run 0 — the earliest default), the median of the runs without
     their controls (``R3``) and with them (``R3+control``), and the largest of the runs with
-    their controls (``R3max+control``, the default) would have decided.
+    their controls (``R3max+control``) would have decided — each with the gap test alone
+    deciding misspecification, as those versions did — and what the default decides: the
+    largest of the runs with their controls, misspecified by the gap test or by a
+    significant effect (``R3max+control+effect``).
     """
     from physinfer.diagnose.decide import (
         DecisionRule,
+        final_verdict,
         misspecification,
+        name_effect,
         null_scale,
         self_consistency_gap,
     )
 
     diag = case_dir / "diagnosis"
     report = json.loads((diag / "diagnosis.json").read_text())
-    decision = DecisionRule(**rule)
 
     def gap(stage: str) -> float:
         return float(json.loads((diag / stage / "gap.json").read_text())["summary"]["gap"])
@@ -228,23 +233,26 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     mirrored = [min(gap(f"calibration-{r}"), gap(f"calibration-{r}-control")) for r in range(runs)]
     floor, q95 = report["baseline"]["floor"], report["baseline"]["floor_q95"]
     variants = {
-        "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"]),
-        "R3": (self_consistency_gap(plain, "median"), report["baseline"]["gap"]),
-        "R3+control": (self_consistency_gap(mirrored, "median"), report["gap_before"]),
-        "R3max+control": (self_consistency_gap(mirrored, "max"), report["gap_before"]),
+        "R1": (self_consistency_gap(plain[:1]), report["baseline"]["gap"], False),
+        "R3": (self_consistency_gap(plain, "median"), report["baseline"]["gap"], False),
+        "R3+control": (self_consistency_gap(mirrored, "median"), report["gap_before"], False),
+        "R3max+control": (self_consistency_gap(mirrored, "max"), report["gap_before"], False),
+        "R3max+control+effect": (self_consistency_gap(mirrored, "max"), report["gap_before"], True),
     }
     out = {}
-    for name, (self_gap, tested) in variants.items():
+    for name, (self_gap, tested, effect_evidence) in variants.items():
+        decision = DecisionRule(**rule, effect_evidence=effect_evidence)
         scale = null_scale(floor, q95, self_gap)
-        verdict = misspecification(tested, scale, decision)
-        winners = [
-            c for c in report["candidates"]
-            if c["checks"]["beats_seed_noise"] and c["checks"]["pays_for_parameters"] and c["improvement"] > scale
+        candidates = [
+            {**c, "significant": bool(c["checks"]["beats_seed_noise"] and c["checks"]["pays_for_parameters"]
+                                      and c["improvement"] > scale)}
+            for c in report["candidates"]
         ]
-        best = min(winners, key=lambda c: (c["gap"], c["n_params"])) if winners and verdict["misspecified"] else None
+        verdict = final_verdict(misspecification(tested, scale, decision), candidates, decision)
+        named = name_effect(candidates, verdict["misspecified"])
+        ratio = next((c["ratio"] for c in candidates if c["effect"] == named), 1.0)
         out[name] = {"self_gap": self_gap, "null_scale": scale, "tested_gap": tested,
-                     "misspecified": verdict["misspecified"], "named": best["effect"] if best else None,
-                     "gap_ratio": best["ratio"] if best else 1.0}
+                     "misspecified": verdict["misspecified"], "named": named, "gap_ratio": ratio}
     return out
 
 
@@ -319,7 +327,7 @@ def main() -> None:
     parser.add_argument("--shard", default=None, help="K/N: run the seeds whose index is K modulo N")
     parser.add_argument("--merge", action="store_true", help="summarise the cases' rows under --out; run nothing")
     parser.add_argument("--compare-calibration", action="store_true",
-                        help="with --merge: each case's decisions under R1, R3 and R3+control (from its stored gaps)")
+                        help="with --merge: each case's decisions under earlier calibrations and rules (from its stored gaps)")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
@@ -350,7 +358,7 @@ def main() -> None:
             rule = {"misspecified_factor": 2.0, "alpha": 0.05, "per_parameter_factor": 0.8}
             c["calibration_variants"] = calibration_variants(case_dir_of(args.plugin, c["hidden"], c["seed"], args.out),
                                                              rule)
-        for name in ("R1", "R3", "R3+control", "R3max+control"):
+        for name in ("R1", "R3", "R3+control", "R3max+control", "R3max+control+effect"):
             variants[name] = summarise([{**c, **c["calibration_variants"][name]} for c in cases])
     out = {
         "plugin": args.plugin,

@@ -13,6 +13,7 @@ from physinfer.diagnose.candidates import off_values, warm_start
 from physinfer.diagnose.decide import (
     DecisionRule,
     effect_significance,
+    final_verdict,
     misspecification,
     name_effect,
     null_scale,
@@ -162,6 +163,22 @@ def test_name_effect_only_when_misspecified():
     assert name_effect(cands, misspecified=True) == "b"
     assert name_effect(cands, misspecified=False) is None
     assert name_effect(cands[2:], misspecified=True) is None
+
+
+def test_a_significant_effect_is_evidence_of_misspecification_unless_the_gap_test_is_required():
+    gap_short = misspecification(5.0, 3.0, DecisionRule())  # 5 < 2 x 3: the gap test does not fire
+    significant = [{"effect": "a", "gap": 1.0, "n_params": 1, "significant": True}]
+    unconvincing = [{"effect": "a", "gap": 4.5, "n_params": 1, "significant": False}]
+    both = final_verdict(misspecification(7.0, 3.0, DecisionRule()), significant, DecisionRule())
+    assert both["misspecified"] and both["evidence"] == ["gap", "effect"] and both["gap_test"]
+    by_effect = final_verdict(gap_short, significant, DecisionRule())
+    assert by_effect["misspecified"] and by_effect["evidence"] == ["effect"] and not by_effect["gap_test"]
+    assert name_effect(significant, by_effect["misspecified"]) == "a"
+    strict = final_verdict(gap_short, significant, DecisionRule(effect_evidence=False))
+    assert not strict["misspecified"] and strict["evidence"] == []
+    assert name_effect(significant, strict["misspecified"]) is None
+    neither = final_verdict(gap_short, unconvincing, DecisionRule())
+    assert not neither["misspecified"] and neither["threshold"] == 6.0
 
 
 def test_decision_rule_validates():

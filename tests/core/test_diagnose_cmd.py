@@ -45,6 +45,32 @@ def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     assert json.loads((run_dir / "run.json").read_text())["effects"] == ["quadratic_drag"]
 
 
+def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test_missed(tmp_path: Path):
+    """With a gap-test threshold no gap reaches, the drag model's significant improvement alone
+    makes the model misspecified and names drag; ``--require-gap-test`` (re-run on the same
+    stages) names nothing."""
+    target = tmp_path / "drag.mp4"
+    sim = _run("simulate", "--plugin", "pendulum", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.4",
+               "--set", "amplitude=50", "--render-set", "size=48", "--out", str(target))
+    assert sim.returncode == 0, sim.stderr
+    args = ["diagnose", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48", "--steps", "8",
+            "--effect-steps", "24", "--optimizer", "cma", "--floor-samples", "4", "--calibration-runs", "1",
+            "--threshold", "1000", "--no-video", "--out", str(tmp_path / "diag")]
+    proc = _run(*args)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
+    assert not report["gap_test"] and report["gap_before"] < report["threshold"]
+    assert report["misspecified"] and report["misspecified_by"] == ["effect"]
+    assert report["named_effect"] == "quadratic_drag" and report["candidates"][0]["significant"]
+    assert "misspecified True (by an effect's significant improvement)" in " ".join(proc.stderr.split())
+    strict = _run(*args, "--require-gap-test", "--json")
+    assert strict.returncode == 0, strict.stderr
+    report = json.loads(strict.stdout)
+    assert report["settings"]["rule"]["effect_evidence"] is False
+    assert report["candidates"][0]["significant"]  # the same stages, resumed
+    assert not report["misspecified"] and report["misspecified_by"] == [] and report["named_effect"] is None
+
+
 def test_refine_model_errors(tmp_path: Path):
     proc = _run("refine", "--plugin", "pendulum", "--model", str(tmp_path / "none.json"), "--steps", "1",
                 "--out", str(tmp_path / "r"))

@@ -90,6 +90,14 @@ def diagnose_cmd(
     threshold: Annotated[
         float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
     ] = 2.0,
+    require_gap_test: Annotated[
+        bool,
+        typer.Option(
+            "--require-gap-test",
+            help="Name an effect only when the gap test alone finds the model misspecified (by default an "
+            "effect's significant improvement is evidence enough).",
+        ),
+    ] = False,
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option("--out", help="Diagnosis directory (re-run to continue it).")] = None,
     no_video: Annotated[bool, typer.Option("--no-video", help="Skip the side-by-side video.")] = False,
@@ -130,16 +138,24 @@ def diagnose_cmd(
         calibrate=calibrate,
         calibration_runs=calibration_runs,
         calibration_control=calibration_control,
-        rule=DecisionRule(misspecified_factor=threshold, calibration_summary=calibration_summary),
+        rule=DecisionRule(
+            misspecified_factor=threshold,
+            calibration_summary=calibration_summary,
+            effect_evidence=not require_gap_test,
+        ),
         videos=not no_video,
     )
     report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))
     if as_json:
         emit_json(report)
         return
+    by = {"gap": "the gap test", "effect": "an effect's significant improvement"}
+    because = " and ".join(by[e] for e in report["misspecified_by"])
     err_console.print(
-        f"[bold]misspecified[/] {report['misspecified']}   gap {report['gap_before']:.4g} → {report['gap_after']:.4g}"
-        f"   (noise floor {report['noise_floor']:.4g}, null scale {report['null_scale']:.4g})",
+        f"[bold]misspecified[/] {report['misspecified']}{f' (by {because})' if because else ''}"
+        f"   gap {report['gap_before']:.4g} → {report['gap_after']:.4g}"
+        f"   (noise floor {report['noise_floor']:.4g}, null scale {report['null_scale']:.4g},"
+        f" gap-test threshold {report['threshold']:.4g})",
         highlight=False,
     )
     for c in report["candidates"]:

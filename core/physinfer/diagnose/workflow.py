@@ -32,6 +32,7 @@ from physinfer.diagnose.candidates import augmented_pipeline, warm_start
 from physinfer.diagnose.decide import (
     DecisionRule,
     effect_significance,
+    final_verdict,
     misspecification,
     name_effect,
     null_scale,
@@ -458,10 +459,10 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     # self-consistency gaps had the budget of the best baseline fit, without them the
     # baseline stage's.
     tested = gap_before if settings.calibrate and settings.calibration_control else float(gap0.gap)
-    verdict = misspecification(tested, scale, settings.rule)
+    gap_verdict = misspecification(tested, scale, settings.rule)
     say(
         f"      gap {tested:.4g}, noise floor {gap0.floor:.4g}, null scale {scale:.4g} → "
-        + ("misspecified" if verdict["misspecified"] else "within what a correct model leaves")
+        + ("misspecified" if gap_verdict["misspecified"] else "within what a correct model leaves")
     )
     candidates = []
     for stage in stages[1:]:
@@ -489,6 +490,9 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
                 "run_dir": stage.result.run_dir,
             }
         )
+    verdict = final_verdict(gap_verdict, candidates, settings.rule)
+    if verdict["evidence"] == ["effect"]:
+        say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
     named = name_effect(candidates, verdict["misspecified"])
     after = next((s for s in stages if s.label == named), before)
     say("[5/5] " + (f"named: {named}" if named else "no effect explains the gap") + "; localising and writing outputs")
@@ -573,6 +577,8 @@ def _outputs(
         "target": str(settings.target_path) if settings.target_path else "default",
         "truth": target.truth,
         "misspecified": verdict["misspecified"],
+        "misspecified_by": verdict["evidence"],
+        "gap_test": verdict["gap_test"],
         "named_effect": named,
         "gap_before": gap_before,
         "gap_after": gap_after,
@@ -620,6 +626,7 @@ def _outputs(
                 "alpha": settings.rule.alpha,
                 "per_parameter_factor": settings.rule.per_parameter_factor,
                 "calibration_summary": settings.rule.calibration_summary,
+                "effect_evidence": settings.rule.effect_evidence,
             },
         },
         "seeds_checked": [int(s) for s in np.asarray(before.gap.seeds)],
