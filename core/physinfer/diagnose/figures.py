@@ -7,7 +7,7 @@ difference written in, so the regions that disagree stand out and the figure sho
 whether the augmented model removed the disagreement.
 
 ``gaps.png``: every model's re-simulation distances to the target (dots) and their median
-(the gap, bar), with the noise floor, the null scale and the misspecification threshold
+(the gap, bar), with the noise floor, the null scale and the gap test's threshold
 as lines: the gap shrinking from the baseline to the named effect.
 """
 
@@ -97,7 +97,7 @@ def plot_gaps(
             distances), baseline first.
         floor: Median distance between re-simulations of the baseline fit.
         scale: The null scale (see :mod:`physinfer.diagnose.decide`).
-        threshold: The misspecification threshold.
+        threshold: The gap test's threshold (a significant effect is evidence too).
         named: Label of the named effect (highlighted), or ``None``.
         path: PNG to write (atomically).
 
@@ -112,7 +112,7 @@ def plot_gaps(
         ax.plot(np.full(d.shape, i) + np.linspace(-0.15, 0.15, max(len(d), 1))[: len(d)], d, "k.", ms=4)
     ax.axhline(floor, color="C1", ls=":", lw=1.2, label="noise floor")
     ax.axhline(scale, color="C3", ls="--", lw=1.0, label="null scale")
-    ax.axhline(threshold, color="C3", ls="-", lw=1.0, label="misspecified above")
+    ax.axhline(threshold, color="C3", ls="-", lw=1.0, label="gap test: misspecified above")
     ax.set_xticks(range(len(models)), [m["label"] for m in models], rotation=20, fontsize=8)
     ax.set_ylabel("distance to target")
     positive = [v for m in models for v in m["distances"] if v > 0] + [v for v in (floor, scale) if v > 0]
