@@ -167,8 +167,8 @@ def test_name_effect_only_when_misspecified():
 
 def test_a_significant_effect_is_evidence_of_misspecification_unless_the_gap_test_is_required():
     gap_short = misspecification(5.0, 3.0, DecisionRule())  # 5 < 2 x 3: the gap test does not fire
-    significant = [{"effect": "a", "gap": 1.0, "n_params": 1, "significant": True}]
-    unconvincing = [{"effect": "a", "gap": 4.5, "n_params": 1, "significant": False}]
+    significant = [{"effect": "a", "gap": 1.0, "n_params": 1, "significant": True, "p_value": 0.03}]
+    unconvincing = [{"effect": "a", "gap": 4.5, "n_params": 1, "significant": False, "p_value": 0.3}]
     both = final_verdict(misspecification(7.0, 3.0, DecisionRule()), significant, DecisionRule())
     assert both["misspecified"] and both["evidence"] == ["gap", "effect"] and both["gap_test"]
     by_effect = final_verdict(gap_short, significant, DecisionRule())
@@ -179,6 +179,11 @@ def test_a_significant_effect_is_evidence_of_misspecification_unless_the_gap_tes
     assert name_effect(significant, strict["misspecified"]) is None
     neither = final_verdict(gap_short, unconvincing, DecisionRule())
     assert not neither["misspecified"] and neither["threshold"] == 6.0
+    # Two candidates are two tests: p = 0.03 is not below 0.05 / 2 (Bonferroni), 0.01 is.
+    two = [*significant, {"effect": "b", "gap": 4.0, "n_params": 1, "significant": False, "p_value": 0.4}]
+    assert not final_verdict(gap_short, two, DecisionRule())["misspecified"]
+    two[0] = {**two[0], "p_value": 0.01}
+    assert final_verdict(gap_short, two, DecisionRule())["evidence"] == ["effect"]
 
 
 def test_decision_rule_validates():

@@ -37,10 +37,12 @@ stalls despite its control; the mirrored budget makes that rare.
 
 - the *gap test* (an omnibus posterior-predictive check): the tested gap exceeds
   ``misspecified_factor`` × the null scale;
-- the *effect test* (a targeted one): some candidate effect is significant (below). A nested
-  model that fits significantly better, by more than the null scale and enough to pay for its
-  parameters, is itself evidence that the baseline lacks something — as a likelihood-ratio
-  test against a named alternative has more power than a goodness-of-fit test against all.
+- the *effect test* (a targeted one): some candidate effect is significant (below) with its
+  rank-test p below ``alpha / C`` for ``C`` candidates (Bonferroni: C tests at once keep the
+  family-wise level ``alpha``). A nested model that fits significantly better, by more than
+  the null scale and enough to pay for its parameters, is itself evidence that the baseline
+  lacks something — as a likelihood-ratio test against a named alternative has more power
+  than a goodness-of-fit test against all.
   The gap test alone missed flag targets whose yaw the augmented model found to 0.2° and
   beat the baseline with at p = 8e-5 (tested gap 0.91 × its threshold; 8-s table in
   docs/benchmarks.md); over every stored diagnosis (≈ 45 no-effect cases, 1–4 candidates
@@ -160,7 +162,7 @@ def final_verdict(gap_verdict: dict[str, Any], candidates: Sequence[dict[str, An
 
     Args:
         gap_verdict: :func:`misspecification`'s result.
-        candidates: Every candidate with its ``significant`` decision.
+        candidates: Every candidate with its ``significant`` decision and ``p_value``.
         rule: Thresholds; ``effect_evidence`` switches the effect test on.
 
     Returns:
@@ -168,7 +170,8 @@ def final_verdict(gap_verdict: dict[str, Any], candidates: Sequence[dict[str, An
         tests that found the model misspecified: ``"gap"``, ``"effect"``) and the final
         ``misspecified``.
     """
-    by_effect = rule.effect_evidence and any(c["significant"] for c in candidates)
+    level = rule.alpha / max(len(candidates), 1)  # Bonferroni over the candidates
+    by_effect = rule.effect_evidence and any(c["significant"] and c["p_value"] < level for c in candidates)
     evidence = [name for name, hit in (("gap", gap_verdict["misspecified"]), ("effect", by_effect)) if hit]
     return {**gap_verdict, "gap_test": bool(gap_verdict["misspecified"]), "evidence": evidence,
             "misspecified": bool(evidence)}
