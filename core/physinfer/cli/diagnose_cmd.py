@@ -88,7 +88,8 @@ def diagnose_cmd(
         ),
     ] = "max",
     threshold: Annotated[
-        float, typer.Option("--threshold", help="Misspecified when the gap exceeds this many null scales.")
+        float,
+        typer.Option("--threshold", help="The gap test finds the model misspecified above this many null scales."),
     ] = 2.0,
     require_gap_test: Annotated[
         bool,
