@@ -215,6 +215,7 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     """
     from physinfer.diagnose.decide import (
         DecisionRule,
+        effect_significance,
         final_verdict,
         misspecification,
         name_effect,
@@ -244,8 +245,9 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
         decision = DecisionRule(**rule, effect_evidence=effect_evidence)
         scale = null_scale(floor, q95, self_gap)
         candidates = [
-            {**c, "significant": bool(c["checks"]["beats_seed_noise"] and c["checks"]["pays_for_parameters"]
-                                      and c["improvement"] > scale)}
+            {**c, **effect_significance(distances=c["distances"], baseline_distances=report["best_baseline"]["to_target"],
+                                        gap=c["gap"], gap_before=report["gap_before"], n_params=c["n_params"],
+                                        scale=scale, rule=decision)}
             for c in report["candidates"]
         ]
         verdict = final_verdict(misspecification(tested, scale, decision), candidates, decision)
