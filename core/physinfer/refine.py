@@ -39,7 +39,7 @@ from physinfer.roles import (
     Target,
     Trial,
 )
-from physinfer.rundir import RunDirectory, TrialRecord
+from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
 from physinfer.types import Clip, Trajectory
 
 if TYPE_CHECKING:
@@ -368,8 +368,6 @@ def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: Refine
         optimizer.tell(trial.index, config.objective(rec.distance), sem if rec.distance is not None else None)
 
 
-NOISE_PRIOR_FILE = "noise_prior.json"
-SELECTION_FILE = "selection.json"
 #: Salt of the selection's seeds, so they repeat neither the trials' nor the noise floor's.
 SELECTION_SEED_SALT = 0x5E1EC7
 
@@ -486,8 +484,6 @@ def _run_refinement(
         records = run_dir.read_trials()
     else:
         run_dir.create(run_info, overwrite=bool(run_info.get("overwrite")))
-        for stale in (NOISE_PRIOR_FILE, SELECTION_FILE):
-            (run_dir.path / stale).unlink(missing_ok=True)
         records = []
     sem = observation_noise(pipeline, target, target_embedding, run_dir, config)
     optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)

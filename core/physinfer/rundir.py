@@ -10,9 +10,14 @@ Layout of ``--out DIR``::
     side_by_side.mp4  target | best simulation
     best_trajectory.npz
 
-Nothing outside ``DIR`` is written. ``--resume`` reads ``run.json`` and ``trials.jsonl``
-back; a mismatch (another plugin) or a corrupt log is a clear error and nothing is
-overwritten.
+    noise_prior.json, selection.json   the observation noise and --select-top's re-simulations
+    .physinfer.lock   held by the process writing the run (:mod:`physinfer.locking`)
+
+Nothing outside ``DIR`` is written, and nothing in it that the run did not create: an
+``--out`` holding anything but a run (a new or empty directory) is refused, and
+``--overwrite`` removes only the files listed above. ``--resume`` reads ``run.json`` and
+``trials.jsonl`` back; a mismatch (another plugin) or a corrupt log is a clear error and
+nothing is overwritten.
 """
 
 from __future__ import annotations
@@ -25,9 +30,26 @@ from typing import Any
 
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, to_jsonable
+from physinfer.locking import LOCK_FILE
 
 RUN_FILE = "run.json"
 TRIALS_FILE = "trials.jsonl"
+NOISE_PRIOR_FILE = "noise_prior.json"
+SELECTION_FILE = "selection.json"
+TARGET_FILE = "target.mp4"
+#: Every file a refinement writes into its run directory: ``--overwrite`` removes these and
+#: nothing else.
+RUN_OUTPUTS = (
+    RUN_FILE,
+    TRIALS_FILE,
+    NOISE_PRIOR_FILE,
+    SELECTION_FILE,
+    TARGET_FILE,
+    "result.json",
+    "refinement.png",
+    "side_by_side.mp4",
+    "best_trajectory.npz",
+)
 
 
 @dataclass
@@ -73,15 +95,65 @@ class RunDirectory:
     def trials_file(self) -> Path:
         return self.path / TRIALS_FILE
 
+    def check_out(self, *, overwrite: bool = False, target: Path | None = None) -> None:
+        """Refuse an ``--out`` that a run may not write, before any work starts.
+
+        Allowed: a new directory, an empty one (a lock file left by a run killed before it
+        began counts as empty), or a physinfer run (to ``--resume`` or ``--overwrite``).
+
+        Args:
+            overwrite: ``--overwrite`` was given (an existing run may be replaced).
+            target: ``--target``; refused when it is a file the run writes.
+
+        Raises:
+            UserInputError: ``--out`` is a file, holds files that are not a run's, holds a
+                ``run.json`` physinfer did not write, or ``--target`` is one of its outputs.
+        """
+        if self.path.exists() and not self.path.is_dir():
+            raise UserInputError(f"--out {self.path} is a file; give a directory (a new one, or a run to resume)")
+        if target is not None and Path(target).resolve() in {(self.path / name).resolve() for name in RUN_OUTPUTS}:
+            raise UserInputError(
+                f"--target {target} is a file the run writes into --out {self.path}; "
+                "move the video elsewhere or choose another --out"
+            )
+        if not self.path.is_dir():
+            return
+        if self.run_file.exists():
+            if not self.holds_run():
+                raise UserInputError(
+                    f"--out {self.path} holds a {RUN_FILE} that physinfer did not write; choose another --out"
+                )
+            return
+        others = sorted(p.name for p in self.path.iterdir() if p.name != LOCK_FILE)
+        if others:
+            shown = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+            raise UserInputError(
+                f"--out {self.path} is not empty ({shown}) and holds no physinfer run; a run would mix its "
+                f"files with yours: give a new or empty directory, e.g. --out {self.path / 'run'}"
+            )
+
+    def holds_run(self) -> bool:
+        """Whether ``run.json`` is a physinfer run's (a JSON object naming its plugin)."""
+        try:
+            info = json.loads(self.run_file.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            return False
+        return isinstance(info, dict) and "plugin" in info
+
     def create(self, run_info: dict[str, Any], *, overwrite: bool = False) -> None:
-        """Start a new run; refuse to clobber an existing one unless ``overwrite``."""
+        """Start a new run; refuse to clobber an existing one unless ``overwrite``.
+
+        ``overwrite`` removes the outputs of the run there (:data:`RUN_OUTPUTS`) first, so
+        no file of the old run is left beside the new one; other files stay.
+        """
         if self.run_file.exists() and not overwrite:
             raise UserInputError(
                 f"{self.path} already holds a run; continue it with --resume, "
                 "or choose another --out (or pass --overwrite to start over)"
             )
         self.path.mkdir(parents=True, exist_ok=True)
-        self.trials_file.unlink(missing_ok=True)
+        for name in RUN_OUTPUTS:
+            (self.path / name).unlink(missing_ok=True)
         atomic_write_json(self.run_file, run_info)
         self.trials_file.touch()
 

@@ -11,11 +11,12 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.errors import UserInputError
+from physinfer.locking import exclusive_directory
 from physinfer.parameters import ParameterSpace, parse_float_assignments
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.registry import Registry, accepts_keyword
 from physinfer.roles import Target
-from physinfer.rundir import RunDirectory, TrialRecord
+from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord
 
 
 def build_pipeline(
@@ -206,6 +207,8 @@ def refine(
     ``duration_s`` and ``embedder_frames``: see :func:`build_pipeline`.
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
+    run_dir = RunDirectory(out)
+    run_dir.check_out(overwrite=overwrite, target=target_path)
     model_file = None
     if model is not None:
         from physinfer.diagnose.model import model_for_refine
@@ -235,7 +238,6 @@ def refine(
     )
     config.validate()
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
-    run_dir = RunDirectory(out)
     if resume:
         stored = run_dir.load_run_info()
         if stored.get("target") not in (None, "default") and target_path is None:
@@ -266,21 +268,22 @@ def refine(
     from physinfer.trial_workers import PipelineSpec, trial_workers
 
     spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)
-    with (
-        trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
-        _progress(budget, enabled=progress) as on_trial,
-    ):
-        result = run_refinement(
-            pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
-        )
-    from physinfer.video import write_video
+    with exclusive_directory(out):  # one writer: a second refine of this --out is refused
+        with (
+            trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
+            _progress(budget, enabled=progress) as on_trial,
+        ):
+            result = run_refinement(
+                pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
+            )
+        from physinfer.video import write_video
 
-    if fixed_values:
-        result.extra["fixed"] = fixed_values
-    if executor is not None:
-        result.extra["executor"] = executor
-    write_video(run_dir.path / "target.mp4", target.clip)
-    write_outputs(result, pipeline, target, run_dir, seed)
+        if fixed_values:
+            result.extra["fixed"] = fixed_values
+        if executor is not None:
+            result.extra["executor"] = executor
+        write_video(run_dir.path / TARGET_FILE, target.clip)
+        write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()
     return result
 

@@ -42,10 +42,11 @@ from physinfer.datasets import (
     parse_split_counts,
     plan_dataset,
 )
-from physinfer.datasets.storage import DirectoryLock, file_digest, npz_digest
+from physinfer.datasets.storage import file_digest, npz_digest
 from physinfer.datasets.worker import to_stored
 from physinfer.errors import SimulationFailed, UserInputError
 from physinfer.hooks import hookimpl
+from physinfer.locking import DirectoryLock
 
 # ----------------------------------------------------------------- a tiny phenomenon
 
@@ -323,7 +324,7 @@ def test_directory_guards(reference, tmp_path):
     lock = DirectoryLock(tmp_path / "busy")
     assert lock.acquire()
     try:
-        with pytest.raises(UserInputError, match="another"):
+        with pytest.raises(UserInputError, match=f"physinfer process {os.getpid()}"):
             generate_dataset(gen, tmp_path / "busy", preset=TINY, seed=7, workers=0)
     finally:
         lock.release()

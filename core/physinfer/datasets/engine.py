@@ -28,8 +28,6 @@ from physinfer.datasets.storage import (
     DATASET_FILE,
     FORMAT_NAME,
     FORMAT_VERSION,
-    LOCK_FILE,
-    DirectoryLock,
     directory_bytes,
     read_json,
     remove_stale_temporaries,
@@ -42,6 +40,7 @@ from physinfer.datasets.storage import (
 from physinfer.datasets.worker import UnitJob, limit_threads, run_unit
 from physinfer.errors import PhysinferError, UserInputError
 from physinfer.io import atomic_write_json, to_jsonable
+from physinfer.locking import LOCK_FILE, exclusive_directory
 
 
 class GenerateProgress(Protocol):
@@ -286,11 +285,8 @@ def generate_dataset(
     """
     t0 = time.perf_counter()
     root = Path(root).expanduser().resolve()
-    lock = DirectoryLock(root)
     _check_directory(root)
-    if not lock.acquire():
-        raise UserInputError(f"{root} is being written by another `dataset generate` run; wait for it to finish")
-    try:
+    with exclusive_directory(root):
         config = dataset_config(generator, preset, seed)
         _start_dataset(root, config)
         remove_stale_temporaries(root)
@@ -315,8 +311,6 @@ def generate_dataset(
         result.seconds = time.perf_counter() - t0
         result.bytes = directory_bytes(root)
         return result
-    finally:
-        lock.release()
 
 
 def _check_directory(root: Path) -> None:

@@ -8,6 +8,7 @@ DIR/shards/unit-00012.npy   uint8 clips of unit 12, (N, T, H, W) or (N, T, H, W,
 DIR/trajectories/sim-000042.npz   the trajectory of simulation 42 (Trajectory.save format)
 DIR/units/unit-00012.json   the record of unit 12: its manifest rows and checksums;
                             written after its files, so it marks the unit complete
+DIR/.physinfer.lock         held by the process writing the dataset (:mod:`physinfer.locking`)
 ```
 
 Every file is written atomically (:mod:`physinfer.io`). Shards are hashed as files
@@ -19,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -35,7 +35,6 @@ MANIFEST_FILE = "manifest.jsonl"
 SHARDS_DIR = "shards"
 TRAJECTORIES_DIR = "trajectories"
 UNITS_DIR = "units"
-LOCK_FILE = ".generate.lock"
 _CHUNK = 8 << 20
 
 
@@ -169,38 +168,3 @@ def read_manifest(root: Path) -> list[dict[str, Any]]:
 def directory_bytes(root: Path) -> int:
     """Total size of the files under ``root``."""
     return sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
-
-
-class DirectoryLock:
-    """An exclusive advisory lock (``flock``) on ``DIR/.generate.lock``.
-
-    Two ``generate`` runs writing one directory would corrupt each other's units; the
-    second one is refused. ``flock`` is local to a machine (not reliable over NFS).
-    """
-
-    def __init__(self, root: Path) -> None:
-        self.path = root / LOCK_FILE
-        self._fd: int | None = None
-
-    def acquire(self) -> bool:
-        """Take the lock; ``False`` if another process holds it."""
-        import fcntl
-
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            return False
-        self._fd = fd
-        return True
-
-    def release(self) -> None:
-        """Release the lock."""
-        if self._fd is not None:
-            import fcntl
-
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None

@@ -43,6 +43,7 @@ from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json
+from physinfer.locking import LOCK_FILE, exclusive_directory
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.registry import Registry
@@ -376,7 +377,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         ``docs/discrepancy.md``).
     """
     settings.validate()
-    say = log or (lambda _msg: None)
+    check_diagnosis_out(settings.out)
     registry.get("optimizers", settings.optimizer)  # fail early, listing the installed ones
     start_time = time.perf_counter()
     base, target = _load(registry, settings)
@@ -385,10 +386,46 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     if not effect_names:
         raise UserInputError(f"no effects are registered for {phenomenon.name!r}: nothing to try")
     effect_objs = {name: registry.effect(name, phenomenon=phenomenon.name) for name in effect_names}
-    steps = settings.steps or phenomenon.default_steps
+    # Everything is checked: only now is --out created, and held against a second writer.
+    with exclusive_directory(settings.out):
+        report = _diagnose(registry, settings, base, target, effect_objs, log or (lambda _msg: None))
+        report["wall_time_s"] = time.perf_counter() - start_time
+        atomic_write_json(settings.out / "diagnosis.json", report)
+    return report
+
+
+def check_diagnosis_out(out: Path) -> None:
+    """Refuse a ``diagnose --out`` that is a file or holds files that are not a diagnosis's.
+
+    Raises:
+        UserInputError: naming what is there and what to give instead.
+    """
+    if out.exists() and not out.is_dir():
+        raise UserInputError(f"--out {out} is a file; give a directory (a new one, or a diagnosis to continue)")
+    if not out.is_dir() or (out / "baseline" / RUN_FILE).is_file() or (out / "diagnosis.json").is_file():
+        return
+    # A lock file and an empty baseline/ are what a diagnosis killed at its start leaves.
+    others = sorted(p.name for p in out.iterdir() if p.name not in (LOCK_FILE, "baseline"))
+    if others:
+        shown = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+        raise UserInputError(
+            f"--out {out} is not empty ({shown}) and holds no diagnosis; a diagnosis would mix its files "
+            f"with yours: give a new or empty directory, e.g. --out {out / 'diagnosis'}"
+        )
+
+
+def _diagnose(
+    registry: Registry,
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    target: Target,
+    effect_objs: Mapping[str, Any],
+    say: Log,
+) -> dict[str, Any]:
+    """The stages and the decision of :func:`run_diagnosis`, with ``--out`` locked; returns the report."""
+    steps = settings.steps or base.phenomenon.default_steps
     effect_steps = settings.effect_steps or steps
     target_label = str(settings.target_path) if settings.target_path else "default"
-    settings.out.mkdir(parents=True, exist_ok=True)
     target_embedding = base.embedder.embed(target.clip)
     seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
     common = {"registry": registry, "settings": settings}
@@ -501,8 +538,6 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
         baseline,
     )
-    report["wall_time_s"] = time.perf_counter() - start_time
-    atomic_write_json(settings.out / "diagnosis.json", report)
     base.renderer.close()
     return report
 

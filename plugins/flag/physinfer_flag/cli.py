@@ -211,8 +211,10 @@ def train_cmd(
         train_config = dataclasses.replace(
             train_config, batch_size=batch_size, clips_per_label=min(4, batch_size)
         )
+    from physinfer.locking import exclusive_directory
+
     started = time.perf_counter()
-    with cpu_threads(threads):
+    with cpu_threads(threads), exclusive_directory(out):  # one writer of --out's checkpoint
         summary = train_from_directory(
             data,
             out,

@@ -134,6 +134,21 @@ def test_train_resumes_and_no_resume_starts_over(app, data, model, tmp_path):
     assert "different model config" in changed["error"]
 
 
+def test_a_second_train_into_one_out_is_refused_naming_the_holder(app, data, tmp_path):
+    import os
+
+    from physinfer.locking import DirectoryLock
+
+    lock = DirectoryLock(tmp_path / "m")
+    assert lock.acquire()
+    try:
+        reply = invoke(app, "train", "-p", "flag", "--data", str(data), "--out", str(tmp_path / "m"), code=2)
+    finally:
+        lock.release()
+    assert f"being written by physinfer process {os.getpid()}" in reply["error"]
+    assert not (tmp_path / "m" / "checkpoint.safetensors").exists()
+
+
 def test_evaluate_triplets_of_trained_model_and_spectral_baseline(app, data, model):
     out, _ = model
     scores = invoke(app, "evaluate", "triplets", "-p", "flag", "--data", str(data), "--model", str(out))
