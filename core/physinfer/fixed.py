@@ -44,6 +44,11 @@ def resolve_fixed(space: ParameterSpace, assignments: Iterable[str], what: str =
                 f"{', '.join(space.names)}"
             )
         for name in names:
+            if name in fixed:  # two items (patterns) would set it; the later would silently win
+                raise UserInputError(
+                    f"{what} {pattern}={value:g}: {name} is already fixed at {fixed[name]:g} by another {what}; "
+                    "fix each parameter once"
+                )
             try:
                 fixed[name] = space[name].check(value)
             except UserInputError as exc:

@@ -17,6 +17,28 @@ from typing import Any
 import numpy as np
 
 
+def check_output_dir(path: str | Path, option: str = "--out") -> None:
+    """Refuse an output directory that cannot be made, before any work starts.
+
+    ``path`` may not exist yet; then the closest existing folder above it must be a
+    writable directory. (Some places refuse even root, ``/proc`` for one; creating the
+    directory reports those, as one line, where the run takes its lock.)
+
+    Raises:
+        UserInputError: ``path`` or a folder above it is a file, or no permission to write.
+    """
+    from physinfer.errors import UserInputError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserInputError(f"{option} {path} is a file; give a directory")
+    existing = next(p for p in (path, *path.parents) if p.exists() or p == p.parent)
+    if not existing.is_dir():
+        raise UserInputError(f"{option} {path}: {existing} is a file, so no directory can be made there")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise UserInputError(f"{option} {path}: no permission to write in {existing}; choose another {option}")
+
+
 @contextmanager
 def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it replaces ``path`` atomically.

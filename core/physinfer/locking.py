@@ -69,6 +69,8 @@ class DirectoryLock:
 def exclusive_directory(root: str | Path, option: str = "--out") -> Iterator[None]:
     """Hold ``root``'s lock for the duration of the block.
 
+    A directory the lock created is removed again when the block ends with nothing in it.
+
     Args:
         root: The output directory (created if missing).
         option: The CLI option that named it, for the message.
@@ -77,8 +79,10 @@ def exclusive_directory(root: str | Path, option: str = "--out") -> Iterator[Non
         UserInputError: ``root`` is a file or cannot be created, or another process holds
             the lock (the message names its PID).
     """
-    if Path(root).exists() and not Path(root).is_dir():
+    root = Path(root)
+    if root.exists() and not root.is_dir():
         raise UserInputError(f"{option} {root} is a file; give a directory")
+    created = not root.exists()
     lock = DirectoryLock(root)
     try:
         acquired = lock.acquire()
@@ -94,4 +98,9 @@ def exclusive_directory(root: str | Path, option: str = "--out") -> Iterator[Non
     try:
         yield
     finally:
+        if created and [p.name for p in root.iterdir()] == [LOCK_FILE]:
+            # Refused before writing anything (a target too short, say): leave no directory.
+            # Removed while still held, so no other process can have taken this lock file.
+            lock.path.unlink()
+            root.rmdir()
         lock.release()

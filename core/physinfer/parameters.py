@@ -235,15 +235,34 @@ def parse_assignments(items: Iterable[str], what: str = "--set") -> dict[str, st
     """Parse ``NAME=VALUE`` strings from the command line into a dict of raw strings.
 
     Raises:
-        UserInputError: for an item without ``=`` or with an empty name.
+        UserInputError: for an item without ``=``, with an empty name, or a name given
+            twice (the last value would silently win).
     """
     out: dict[str, str] = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
             raise UserInputError(f"{what} expects NAME=VALUE, got {item!r}")
-        out[name.strip()] = value.strip()
+        name = name.strip()
+        if name in out:
+            raise UserInputError(
+                f"{what} {name} is given twice ({name}={out[name]} and {name}={value.strip()}); give it once"
+            )
+        out[name] = value.strip()
     return out
+
+
+def refuse_repeats(names: Iterable[str], option: str) -> None:
+    """Refuse a name given twice to a repeatable option such as ``--effect``.
+
+    Raises:
+        UserInputError: naming the repeated name.
+    """
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise UserInputError(f"{option} {name} is given twice; give it once")
+        seen.add(name)
 
 
 def parse_float_assignments(items: Iterable[str], what: str = "--set") -> dict[str, float]:

@@ -75,10 +75,12 @@ class Renderer(ABC):
         """Validate ζ before any simulation runs; returns the complete ζ.
 
         The default accepts the keys of ``default_render_params`` (and anything when that
-        is empty). Renderers with typed settings override it to check values too.
+        is empty), and refuses what no renderer can use: a number that is not finite, or
+        a value that is not a number where the default is one. Renderers override it to
+        check types and ranges of their own (``size=0`` is finite but no image).
 
         Raises:
-            UserInputError: naming an unknown key and the known ones.
+            UserInputError: naming an unknown key and the known ones, or the bad value.
         """
         from physinfer.errors import UserInputError
 
@@ -89,10 +91,19 @@ class Renderer(ABC):
             raise UserInputError(
                 f"unknown render setting(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}"
             )
+        for key, value in given.items():
+            numeric = _is_number(self.default_render_params.get(key, value))
+            if numeric and not (_is_number(value) and np.isfinite(value)):
+                raise UserInputError(f"render setting {key}={value!r}: give a finite number")
         return {**self.default_render_params, **given}
 
     def close(self) -> None:  # noqa: B027 - optional hook, no-op by default
         """Release GPU/EGL resources (optional)."""
+
+
+def _is_number(value: Any) -> bool:
+    """A real number (``bool`` is not one: ``True`` is a switch, not a size)."""
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, (bool, np.bool_))
 
 
 class Embedder(ABC):

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.errors import UserInputError
-from physinfer.io import atomic_write_json, to_jsonable
+from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.locking import LOCK_FILE
 
 RUN_FILE = "run.json"
@@ -106,11 +106,11 @@ class RunDirectory:
             target: ``--target``; refused when it is a file the run writes.
 
         Raises:
-            UserInputError: ``--out`` is a file, holds files that are not a run's, holds a
-                ``run.json`` physinfer did not write, or ``--target`` is one of its outputs.
+            UserInputError: ``--out`` is a file or cannot be made, holds files that are not a
+                run's, holds a ``run.json`` physinfer did not write, or ``--target`` is one of
+                its outputs.
         """
-        if self.path.exists() and not self.path.is_dir():
-            raise UserInputError(f"--out {self.path} is a file; give a directory (a new one, or a run to resume)")
+        check_output_dir(self.path)
         if target is not None and Path(target).resolve() in {(self.path / name).resolve() for name in RUN_OUTPUTS}:
             raise UserInputError(
                 f"--target {target} is a file the run writes into --out {self.path}; "

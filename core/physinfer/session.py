@@ -12,7 +12,7 @@ from typing import Any
 
 from physinfer.errors import UserInputError
 from physinfer.locking import exclusive_directory
-from physinfer.parameters import ParameterSpace, parse_float_assignments
+from physinfer.parameters import ParameterSpace, parse_float_assignments, refuse_repeats
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.registry import Registry, accepts_keyword
 from physinfer.roles import Target
@@ -48,11 +48,14 @@ def build_pipeline(
             whose factory takes ``n_frames`` (parameter-free ones; an SDN's are in its weights).
 
     Raises:
-        UserInputError: a duration the phenomenon cannot record, or frames the embedder
-            cannot be told.
+        UserInputError: a duration the phenomenon cannot record, frames the embedder
+            cannot be told, a device this machine lacks, or an effect given twice.
     """
+    from physinfer.devices import check_device
     from physinfer.fixed import FixedParameters, resolve_fixed
 
+    device = check_device(device)  # refused here, not ignored by an embedder that needs none
+    refuse_repeats(effects, "--effect")
     phenomenon = registry.phenomenon(plugin)
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
     simulator = make_simulator(phenomenon, effect_objs, duration_s)

@@ -213,6 +213,9 @@ def simulate_cmd(
         raise UserInputError("nothing to write: give --out VIDEO and/or --trajectory-out FILE.npz")
     if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+    for option, path in (("--out", out), ("--trajectory-out", trajectory_out)):
+        if path is not None and path.is_dir():
+            raise UserInputError(f"{option} {path} is a directory; give a file name")
     registry, _ = registry_and_infos()
     pipeline = build_pipeline(registry, plugin, effects=effect, embedder="", duration_s=duration)
     params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))

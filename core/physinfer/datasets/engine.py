@@ -39,7 +39,7 @@ from physinfer.datasets.storage import (
 )
 from physinfer.datasets.worker import UnitJob, limit_threads, run_unit
 from physinfer.errors import PhysinferError, UserInputError
-from physinfer.io import atomic_write_json, to_jsonable
+from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.locking import LOCK_FILE, exclusive_directory
 
 
@@ -314,8 +314,7 @@ def generate_dataset(
 
 
 def _check_directory(root: Path) -> None:
-    if root.exists() and not root.is_dir():
-        raise UserInputError(f"--out {root} is a file; give a directory")
+    check_output_dir(root)
     if root.is_dir() and not (root / DATASET_FILE).exists():
         others = [p.name for p in root.iterdir() if p.name != LOCK_FILE]
         if others:

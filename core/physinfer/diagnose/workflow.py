@@ -42,9 +42,10 @@ from physinfer.diagnose.gap import gap_numbers, measure_gap
 from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, check_output_dir
 from physinfer.locking import LOCK_FILE, exclusive_directory
 from physinfer.noise import NoiseFloor, noise_seeds
+from physinfer.parameters import refuse_repeats
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.registry import Registry
 from physinfer.roles import Target
@@ -129,6 +130,7 @@ class DiagnoseSettings:
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad setting."""
+        refuse_repeats(self.effects, "--effect")
         for name, value in (("--steps", self.steps), ("--effect-steps", self.effect_steps)):
             if value is not None and value < 1:
                 raise UserInputError(f"{name} must be at least 1, got {value}")
@@ -400,8 +402,7 @@ def check_diagnosis_out(out: Path) -> None:
     Raises:
         UserInputError: naming what is there and what to give instead.
     """
-    if out.exists() and not out.is_dir():
-        raise UserInputError(f"--out {out} is a file; give a directory (a new one, or a diagnosis to continue)")
+    check_output_dir(out)
     if not out.is_dir() or (out / "baseline" / RUN_FILE).is_file() or (out / "diagnosis.json").is_file():
         return
     # A lock file and an empty baseline/ are what a diagnosis killed at its start leaves.

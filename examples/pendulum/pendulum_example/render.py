@@ -7,22 +7,53 @@ bob is rigid, so a translation of its first-frame mesh reproduces every frame).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import numpy as np
 
 from physinfer import Clip, Renderer, Trajectory
 from physinfer.rendering import OffscreenContext, look_at, use_headless_gl
+from physinfer.settings import MappingSettings, check_range
+
+
+@dataclass(frozen=True)
+class PendulumRenderParams(MappingSettings):
+    """Render parameters ζ of :class:`PendulumRenderer`; every field is a ζ key.
+
+    Attributes:
+        size: Side of the square frames in pixels, 16 to 1024.
+        distance: Camera distance from the pendulum in metres, 0.5 to 50.
+        yfov_deg: Vertical field of view in degrees, 5 to 120.
+        light: Directional light intensity, 0 to 100.
+    """
+
+    settings_noun: ClassVar[str] = "render parameter"
+    settings_owner: ClassVar[str] = "pendulum"
+
+    size: int = 128
+    distance: float = 3.2
+    yfov_deg: float = 50.0
+    light: float = 4.0
+
+    def validate(self) -> None:
+        """Check every value (finite, in range) before anything is simulated or rendered.
+
+        Raises:
+            UserInputError: naming the offending key and its range.
+        """
+        # A frame of 100000² pixels would ask for terabytes; 0 or fewer pixels is a GL error.
+        check_range("size", self.size, 16, 1024)
+        check_range("distance", self.distance, 0.5, 50.0)
+        check_range("yfov_deg", self.yfov_deg, 5.0, 120.0)
+        check_range("light", self.light, 0.0, 100.0)
 
 
 class PendulumRenderer(Renderer):
-    """pyrender renderer of pendulum trajectories.
+    """pyrender renderer of pendulum trajectories (see :class:`PendulumRenderParams` for ζ)."""
 
-    Render parameters ζ: ``size`` (pixels, square), ``distance`` (camera distance in m),
-    ``yfov_deg`` (vertical field of view), ``light`` (intensity).
-    """
-
-    default_render_params: Mapping[str, Any] = {"size": 128, "distance": 3.2, "yfov_deg": 50.0, "light": 4.0}
+    default_render_params: Mapping[str, Any] = MappingProxyType(PendulumRenderParams().to_dict())
 
     def __init__(self) -> None:
         self._contexts: dict[int, OffscreenContext] = {}
@@ -33,8 +64,8 @@ class PendulumRenderer(Renderer):
         import pyrender
         import trimesh
 
-        zeta = {**self.default_render_params, **(render_params or {})}
-        size = int(zeta["size"])
+        zeta = self.check_render_params(render_params)
+        size = zeta["size"]
         ctx = self._contexts.setdefault(size, OffscreenContext(size, size))
         pivot = np.asarray(trajectory.extras.get("pivot", np.array([0.0, 0.0, 1.8])), dtype=float)
 
@@ -66,6 +97,14 @@ class PendulumRenderer(Renderer):
             scene.set_pose(rod_node, _rod_pose(pivot, centre))
             frames[i] = ctx.render(scene)
         return Clip(frames, trajectory.fps)
+
+    def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:
+        """The complete ζ, typed and range-checked (see :class:`PendulumRenderParams`).
+
+        Raises:
+            UserInputError: an unknown key, a value of the wrong type or out of range.
+        """
+        return PendulumRenderParams.from_mapping(render_params).to_dict()
 
     def close(self) -> None:
         for ctx in self._contexts.values():

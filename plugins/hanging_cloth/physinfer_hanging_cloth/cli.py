@@ -34,12 +34,16 @@ def evaluate_bouman_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Bouman et al. evaluation: embeddings → PCA → linear regression, leave one fabric out → Pearson R."""
-    from physinfer.io import atomic_write_json, atomic_write_text
+    from physinfer.devices import check_device
+    from physinfer.io import atomic_write_json, atomic_write_text, check_output_dir
     from physinfer_hanging_cloth.data import load_dataset
     from physinfer_hanging_cloth.evaluation import embed_videos, evaluate_embeddings, plot_bars
 
     if pca_dims < 1:
         raise UserInputError(f"--pca-dims must be at least 1, got {pca_dims}")
+    device = check_device(device)  # also for embedders that take none: never silently ignored
+    if out is not None:
+        check_output_dir(out)
     dataset = load_dataset(data)  # check the data before loading any network
     registry, _ = registry_and_infos()
     embedder_obj = registry.embedder(embedder, model=str(model) if model else None, device=device)
@@ -84,8 +88,10 @@ def dataset_bouman_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Write a synthetic hanging-cloth dataset in the Bouman format (fabrics × fan levels W1–W3)."""
+    from physinfer.io import check_output_dir
     from physinfer_hanging_cloth.generate import SyntheticSettings, generate_dataset
 
+    check_output_dir(out)
     settings = SyntheticSettings(n_fabrics=fabrics, n_frames=frames, image_size=size, seed=seed)
 
     def progress(done: int, total: int) -> None:

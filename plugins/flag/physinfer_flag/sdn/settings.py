@@ -12,6 +12,7 @@ from typing import Any, TypeVar
 
 import torch
 
+from physinfer.devices import check_device
 from physinfer.errors import UserInputError
 
 T = TypeVar("T")
@@ -47,5 +48,9 @@ def default_device() -> str:
 
 
 def resolve_device(device: str | torch.device | None) -> torch.device:
-    """The given device, or :func:`default_device`."""
-    return torch.device(device if device is not None else default_device())
+    """The given device, or :func:`default_device`.
+
+    Raises:
+        UserInputError: a device that is not a torch device or that this machine lacks.
+    """
+    return torch.device(check_device(str(device)) if device is not None else default_device())
