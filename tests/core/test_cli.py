@@ -1,6 +1,9 @@
 import json
+import os
+import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -110,3 +113,68 @@ def test_refine_suggests_more_search_only_when_the_fit_is_well_above_the_noise_f
     assert noise_ratio_hint(NOISE_RATIO_HINT) is None
     hint = noise_ratio_hint(2.84)
     assert "noise ratio 2.84" in hint and "--resume --steps" in hint and "physinfer diagnose" in hint
+
+
+#: Makes the pendulum's simulator raise a bug (not a user error) in the CLI's process.
+PLUGIN_BUG = """
+import pendulum_example.physics as physics
+
+def broken(self, params, *, seed=0):
+    raise ZeroDivisionError("a bug in the plugin")
+
+physics.PendulumSimulator.simulate = broken
+"""
+
+
+def test_an_internal_error_is_one_line_with_a_saved_traceback_outside_out(tmp_path):
+    hooks = tmp_path / "hooks"
+    hooks.mkdir()
+    (hooks / "sitecustomize.py").write_text(PLUGIN_BUG)
+    path = os.pathsep.join(filter(None, [str(hooks), os.environ.get("PYTHONPATH")]))
+    env = {**os.environ, "PYTHONPATH": path, "TMPDIR": str(tmp_path / "tmp")}
+    (tmp_path / "tmp").mkdir()
+    out = tmp_path / "clip.mp4"
+    for as_json in (False, True):
+        proc = subprocess.run(
+            [str(BIN), "simulate", "--plugin", "pendulum", "--out", str(out), *(["--json"] if as_json else [])],
+            capture_output=True, text=True, timeout=300, env=env,
+        )  # fmt: skip
+        assert proc.returncode == 1, proc.stderr
+        assert "Traceback" not in proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1, proc.stderr
+        match = re.fullmatch(
+            r"error: internal error \(ZeroDivisionError: a bug in the plugin\); traceback saved to (\S+)", lines[0]
+        )
+        assert match, lines[0]
+        saved = Path(match.group(1))
+        assert saved.parent == tmp_path / "tmp" / "physinfer-errors"
+        assert "Traceback" in saved.read_text() and "def broken" not in proc.stderr
+        if as_json:
+            reply = json_out(proc)
+            assert reply == {"error": lines[0].removeprefix("error: "), "traceback": str(saved)}
+        else:
+            assert proc.stdout == ""
+    assert not out.exists()
+
+
+def test_dataset_generate_takes_the_one_error_path(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from physinfer.cli import dataset_cmd
+
+    command = ["generate", "-p", "nope", "--out", str(tmp_path / "d"), "--json"]
+    result = CliRunner().invoke(dataset_cmd.dataset_app, command)
+    assert result.exit_code == 2 and "unknown plugin/phenomenon 'nope'" in json.loads(result.stdout)["error"]
+
+    def bug(**_kwargs):
+        raise KeyError("units")
+
+    monkeypatch.setattr(dataset_cmd, "_generate", bug)  # a fault injected where the work starts
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    result = CliRunner().invoke(dataset_cmd.dataset_app, command)
+    assert result.exit_code == 1, result.output
+    reply = json.loads(result.stdout)
+    assert reply["error"].startswith("internal error (KeyError: 'units'); traceback saved to ")
+    assert Path(reply["traceback"]).parent == tmp_path / "physinfer-errors"
+    assert "KeyError: 'units'" in Path(reply["traceback"]).read_text()

@@ -2,19 +2,19 @@
 
 Mounted by the main app as ``physinfer dataset``. Heavy work is imported inside the
 command, so ``physinfer --help`` stays fast. Progress and the closing summary go to
-stderr; with ``--json`` exactly one JSON object goes to stdout.
+stderr; with ``--json`` exactly one JSON object goes to stdout. Errors take the CLI's one
+path (:func:`physinfer.cli.app.handle_errors`).
 """
 
 from __future__ import annotations
 
-import json
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from physinfer.errors import PhysinferError, UserInputError
+from physinfer.cli.app import emit_json, handle_errors
+from physinfer.errors import UserInputError
 
 if TYPE_CHECKING:
     from physinfer.datasets import DatasetPreset, GenerateResult
@@ -33,6 +33,7 @@ def dataset_group() -> None:
 
 
 @dataset_app.command("generate")
+@handle_errors(interrupted="interrupted; finished units are saved: run the same command again to resume")
 def generate_cmd(
     plugin: Annotated[str, typer.Option("--plugin", "-p", help="Phenomenon to simulate (see `physinfer plugins`).")],
     out: Annotated[Path, typer.Option("--out", help="Dataset directory; re-running on it resumes.")],
@@ -71,35 +72,26 @@ def generate_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")] = False,
 ) -> None:
     """Simulate, render and store a dataset with train/val/test splits; resumes an interrupted run."""
-    try:
-        result = _generate(
-            plugin=plugin,
-            out=out,
-            preset_name=preset,
-            sims=sims,
-            renders_per_sim=renders_per_sim,
-            frames=frames,
-            size=size,
-            rgb=rgb,
-            sims_per_unit=sims_per_unit,
-            seeds_per_theta=seeds_per_theta,
-            workers=workers,
-            scheduler=scheduler,
-            seed=seed,
-            verify=verify,
-        )
-    except (UserInputError, PhysinferError) as exc:
-        _stderr(f"[bold red]error:[/] {exc}")
-        if as_json:
-            _emit_json({"error": str(exc)})
-        raise typer.Exit(2) from None
-    except KeyboardInterrupt:
-        _stderr("interrupted; finished units are saved: run the same command again to resume")
-        raise typer.Exit(130) from None
+    result = _generate(
+        plugin=plugin,
+        out=out,
+        preset_name=preset,
+        sims=sims,
+        renders_per_sim=renders_per_sim,
+        frames=frames,
+        size=size,
+        rgb=rgb,
+        sims_per_unit=sims_per_unit,
+        seeds_per_theta=seeds_per_theta,
+        workers=workers,
+        scheduler=scheduler,
+        seed=seed,
+        verify=verify,
+    )
     summary = result.summary()
     _stderr(_summary_line(result))
     if as_json:
-        _emit_json(summary)
+        emit_json(summary)
 
 
 def _generate(
@@ -200,13 +192,6 @@ def _stderr(text: str) -> None:
     from rich.console import Console
 
     Console(stderr=True, highlight=False).print(text)
-
-
-def _emit_json(obj: Any) -> None:
-    from physinfer.io import to_jsonable
-
-    sys.stdout.write(json.dumps(to_jsonable(obj), allow_nan=False) + "\n")
-    sys.stdout.flush()
 
 
 class _RichProgress:
