@@ -37,3 +37,18 @@ def physinfer_register_commands(registry: Registry) -> None:
         "physinfer.cli.diagnose_cmd:diagnose_cmd",
         "Find where a refined model disagrees with the video and name the missing effect.",
     )
+    registry.add_command(
+        "posterior",
+        "physinfer.cli.posterior_cmd:posterior_app",
+        "Amortized posteriors over θ: train an estimator on a dataset (sbi).",
+    )
+    registry.add_command(
+        "infer",
+        "physinfer.cli.posterior_cmd:infer_cmd",
+        "The posterior of one video in seconds: medians, credible intervals, identifiability.",
+    )
+    registry.add_command(
+        "evaluate calibration",
+        "physinfer.cli.posterior_cmd:calibration_cmd",
+        "Simulation-based calibration of a posterior estimator on held-out simulations.",
+    )

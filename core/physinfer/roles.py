@@ -253,6 +253,8 @@ class Phenomenon:
         dataset_generator: Optional ``"module:attr"`` or callable building a dataset.
         effects: Names of effects registered for this phenomenon.
         default_steps: Refinement budget used when ``--steps`` is not given.
+        default_posterior: Path of a shipped posterior estimator (``physinfer posterior
+            train``) used by ``infer`` and ``refine`` when none is given; ``None``: none.
     """
 
     name: str
@@ -265,3 +267,4 @@ class Phenomenon:
     dataset_generator: Any = None
     effects: tuple[str, ...] = ()
     default_steps: int = 40
+    default_posterior: str | None = None

@@ -1,0 +1,185 @@
+"""``physinfer posterior train``, ``physinfer infer`` and ``physinfer evaluate calibration``.
+
+Thin shells over :mod:`physinfer.posterior.workflow`: parse options, call, print (one JSON
+object with ``--json``; progress on stderr).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from physinfer.cli.app import (
+    JsonOpt,
+    PluginOpt,
+    emit_json,
+    err_console,
+    handle_errors,
+    registry_and_infos,
+)
+
+posterior_app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+
+DeviceOpt = Annotated[
+    str | None, typer.Option("--device", help="torch device: cpu, cuda, cuda:N (default: cuda if present).")
+]
+PosteriorOpt = Annotated[
+    Path | None,
+    typer.Option("--posterior", help="Estimator file from `physinfer posterior train` (default: the plugin's shipped one)."),
+]
+
+
+@posterior_app.callback()
+def posterior_group() -> None:
+    """Amortized posteriors over θ (neural posterior estimation with sbi; docs/posterior.md)."""
+
+
+@contextmanager
+def _stage_progress(enabled: bool = True) -> Iterator[object]:
+    """A rich progress bar per stage on stderr; yields ``progress(stage, done, total)``."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    bar = Progress(
+        TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err_console, disable=not enabled,
+    )  # fmt: skip
+    tasks: dict[str, object] = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage not in tasks:
+            tasks[stage] = bar.add_task(stage, total=total)
+        bar.update(tasks[stage], completed=done, total=total)
+
+    with bar:
+        yield progress
+
+
+@posterior_app.command("train")
+@handle_errors()
+def train_cmd(
+    plugin: PluginOpt,
+    data: Annotated[Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")],
+    out: Annotated[Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")],
+    embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
+    embedder_frames: Annotated[
+        int | None, typer.Option("--embedder-frames", help="Frames a parameter-free embedder reads.")
+    ] = None,
+    weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
+    split: Annotated[str, typer.Option("--split", help="Dataset split to train on.")] = "train",
+    density: Annotated[str, typer.Option("--density", help="Density estimator: maf, nsf or mdn.")] = "maf",
+    max_epochs: Annotated[int, typer.Option("--max-epochs", help="Upper bound on training epochs.")] = 400,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")] = 0,
+    device: DeviceOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Train q(θ | s(x)) on a dataset's (θ, embedding) pairs; embeddings are cached beside the dataset."""
+    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.workflow import train_posterior
+
+    registry, _ = registry_and_infos()
+    with _stage_progress() as progress:
+        result = train_posterior(
+            registry, plugin=plugin, data=data, out=out, embedder=embedder, embedder_frames=embedder_frames,
+            weights=weights, device=device, split=split,
+            network=NetworkConfig(density=density, max_epochs=max_epochs), seed=seed, progress=progress,
+        )  # fmt: skip
+    if as_json:
+        emit_json(result.to_dict())
+        return
+    t = result.estimator.config.training
+    err_console.print(
+        f"trained on {t['pairs']} clips in {t['epochs']} epochs (validation loss {t['best_validation_loss']:.3f}); "
+        f"wrote {result.path}",
+        highlight=False,
+    )
+
+
+@handle_errors()
+def infer_cmd(
+    plugin: PluginOpt,
+    target: Annotated[
+        Path | None, typer.Option("--target", help="Video; default: the plugin's embedded target.")
+    ] = None,
+    posterior: PosteriorOpt = None,
+    fps: Annotated[float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")] = None,
+    truth: Annotated[
+        list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval).")
+    ] = [],  # noqa: B006
+    samples: Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")] = 10000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png.")
+    ] = None,
+    device: DeviceOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
+    from physinfer.posterior.workflow import infer, summary_lines
+
+    if out is None:
+        out = Path("runs") / f"infer-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
+    registry, _ = registry_and_infos()
+    report = infer(
+        registry, plugin=plugin, out=out, target_path=target, posterior=posterior, fps=fps, truth=truth,
+        n_samples=samples, seed=seed, device=device,
+    )  # fmt: skip
+    if as_json:
+        emit_json(report.to_dict())
+        return
+    err_console.print(f"[bold]posterior[/] ({report.estimator.name}, {len(report.samples_unit)} samples)")
+    for line in summary_lines(report.marginals):
+        err_console.print(line, highlight=False)
+    for pair in report.correlations[:3]:
+        err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
+    err_console.print(f"results in {out}")
+
+
+
+@handle_errors()
+def calibration_cmd(
+    plugin: PluginOpt,
+    data: Annotated[Path, typer.Option("--data", help="Dataset of held-out simulations.")],
+    posterior: PosteriorOpt = None,
+    split: Annotated[str, typer.Option("--split", help="Dataset split to check on.")] = "test",
+    samples: Annotated[int, typer.Option("--samples", help="Posterior samples per simulation.")] = 1000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Directory for calibration.json and calibration.png.")
+    ] = None,
+    device: DeviceOpt = None,
+    as_json: JsonOpt = False,
+) -> None:
+    """Simulation-based calibration: rank histograms and coverage of the 50 % and 90 % intervals."""
+    from physinfer.posterior.workflow import evaluate_calibration
+
+    if out is None:
+        out = Path("runs") / f"calibration-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
+    registry, _ = registry_and_infos()
+    with _stage_progress() as progress:
+        report = evaluate_calibration(
+            registry, plugin=plugin, data=data, out=out, posterior=posterior, split=split, n_samples=samples,
+            seed=seed, device=device, progress=progress,
+        )  # fmt: skip
+    summary = report.to_dict()
+    if as_json:
+        emit_json(summary)
+        return
+    tol = summary["tolerance"]
+    err_console.print(
+        f"[bold]coverage[/] on {summary['n_pairs']} held-out simulations "
+        f"(calibrated within ±{tol['coverage50']:.2f} / ±{tol['coverage90']:.2f})",
+        highlight=False,
+    )
+    for name, row in summary["parameters"].items():
+        err_console.print(
+            f"  {name}: 50 % → {row['coverage50']:.2f}, 90 % → {row['coverage90']:.2f} ({row['verdict90']}); "
+            f"median error {row['median_abs_error']:.3g}, contraction {row['mean_contraction']:.2f}",
+            highlight=False,
+        )
+    err_console.print(f"results in {out}")
+

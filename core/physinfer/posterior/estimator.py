@@ -1,0 +1,365 @@
+"""An amortized posterior q(θ | s(x)) trained with sbi's NPE, saved and loaded safely.
+
+θ is learnt in the normalised coordinates of the phenomenon's parameter space, where the
+prior is uniform on ``[-1, 1]^D`` (the distribution ``physinfer dataset generate`` draws θ
+from); samples are mapped back to physical units by the space.
+
+File format (one ``.safetensors`` file, no pickles anywhere):
+
+- the density estimator's ``state_dict`` as safetensors tensors;
+- metadata ``physinfer``: the JSON :class:`EstimatorConfig` (plugin, embedder and its frames,
+  the embedding of a fixed probe clip, clip length, parameter space, prior, network);
+- metadata ``digest``: sha256 over the tensors and the config, so an edited file is refused.
+
+Loading rebuilds the network from the config with sbi's builder and loads the tensors
+into it (``strict``); nothing in the file is executed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_path
+from physinfer.parameters import ParameterSpace
+
+FORMAT_NAME = "physinfer-posterior"
+FORMAT_VERSION = 1
+DENSITY_MODELS = ("maf", "nsf", "mdn")
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """The conditional density estimator (sbi's ``posterior_nn``) and how it is trained.
+
+    Attributes:
+        density: ``"maf"`` (masked autoregressive flow), ``"nsf"`` (neural spline flow) or
+            ``"mdn"`` (mixture density network).
+        hidden_features: Width of the flow's networks.
+        num_transforms: Flow layers.
+        batch_size: Training batch size.
+        learning_rate: Adam's step size.
+        max_epochs: Upper bound on epochs (training stops earlier once the validation loss
+            has not improved for ``stop_after_epochs``).
+        stop_after_epochs: Patience of the early stop.
+        validation_fraction: Share of the pairs held out for the early stop.
+    """
+
+    density: str = "maf"
+    hidden_features: int = 64
+    num_transforms: int = 5
+    batch_size: int = 50
+    learning_rate: float = 1e-3
+    max_epochs: int = 400
+    stop_after_epochs: int = 20
+    validation_fraction: float = 0.1
+
+    def validate(self) -> None:
+        """Raise :class:`UserInputError` on settings sbi cannot use."""
+        if self.density not in DENSITY_MODELS:
+            raise UserInputError(f"--density {self.density!r}: choose one of {', '.join(DENSITY_MODELS)}")
+        for name in ("hidden_features", "num_transforms", "batch_size", "max_epochs", "stop_after_epochs"):
+            if int(getattr(self, name)) < 1:
+                raise UserInputError(f"{name.replace('_', '-')} must be at least 1, got {getattr(self, name)}")
+        if not 0 < self.learning_rate < 1:
+            raise UserInputError(f"learning rate must lie in (0, 1), got {self.learning_rate}")
+        if not 0 < self.validation_fraction < 0.5:
+            raise UserInputError(f"validation fraction must lie in (0, 0.5), got {self.validation_fraction}")
+
+    def builder(self) -> Callable[..., Any]:
+        """sbi's builder of this network, called with a batch ``(theta, x)``."""
+        from sbi.neural_nets import posterior_nn
+
+        return posterior_nn(
+            model=self.density, hidden_features=self.hidden_features, num_transforms=self.num_transforms
+        )
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """What an estimator was trained for; written into its file and checked on load.
+
+    Attributes:
+        plugin: Phenomenon name.
+        embedder: Embedder name the summaries ``s(x)`` come from.
+        embedder_frames: Frames the embedder reads (its ``n_frames``).
+        embedder_fps: Frame rate the embedder resamples to.
+        probe: Embedding of :func:`probe_clip` by that embedder: a fingerprint that tells
+            another embedder (or other weights) apart at inference.
+        clip_seconds: Length of the training clips; a shorter target cannot be embedded alike.
+        parameters: The parameter space (``ParameterSpace.to_dict()``).
+        x_dim: Embedding dimension ``E``.
+        network: The density estimator's settings.
+        prior: The prior θ was drawn from.
+        training: How it was trained (dataset, pairs, epochs, losses, seed), informative.
+        frames_option: ``--embedder-frames`` as given at training (``None``: the embedder's
+            own), passed again when the embedder is rebuilt for inference.
+        weights: ``--weights`` as given at training (``None``: the plugin's shipped ones).
+    """
+
+    plugin: str
+    embedder: str
+    embedder_frames: int
+    embedder_fps: float
+    probe: list[float]
+    clip_seconds: float
+    parameters: list[dict[str, Any]]
+    x_dim: int
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    prior: dict[str, Any] = field(
+        default_factory=lambda: {"kind": "uniform", "coordinates": "normalised", "low": -1.0, "high": 1.0}
+    )
+    training: dict[str, Any] = field(default_factory=dict)
+    frames_option: int | None = None
+    weights: str | None = None
+
+    @property
+    def parameter_space(self) -> ParameterSpace:
+        """The parameter space θ lives in."""
+        return ParameterSpace.from_dict(self.parameters)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        d = asdict(self)
+        d["format"], d["version"] = FORMAT_NAME, FORMAT_VERSION
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> EstimatorConfig:
+        """Inverse of :meth:`to_dict`; raises :class:`KeyError`/:class:`TypeError` on a bad dict."""
+        body = {k: v for k, v in d.items() if k not in ("format", "version")}
+        body["network"] = NetworkConfig(**body.get("network", {}))
+        return cls(**body)
+
+
+def probe_clip(n_frames: int, fps: float, size: int = 96) -> Any:
+    """A fixed synthetic clip (drifting, flickering blobs): the embedder fingerprint's input.
+
+    Returns:
+        A :class:`~physinfer.types.Clip` of ``n_frames`` RGB frames at ``fps``.
+    """
+    from physinfer.types import Clip
+
+    t = np.arange(n_frames, dtype=np.float64)[:, None, None] / fps
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float64) / size
+    wave = (
+        np.sin(2 * np.pi * (3 * xx + 1.3 * t))
+        + np.cos(2 * np.pi * (2 * yy - 0.7 * t + xx))
+        + 0.5 * np.sin(2 * np.pi * 2.1 * t) * np.exp(-((xx - 0.5) ** 2 + (yy - 0.5) ** 2) * 12)
+    )
+    gray = np.clip(127.5 + 50.0 * wave, 0, 255).astype(np.uint8)
+    return Clip(np.repeat(gray[..., None], 3, axis=-1), fps)
+
+
+def embedder_probe(embedder: Any) -> np.ndarray:
+    """``(E,)`` the embedding of :func:`probe_clip` by ``embedder`` (its fingerprint)."""
+    return np.asarray(embedder.embed(probe_clip(int(embedder.n_frames), float(embedder.fps))), dtype=np.float64)
+
+
+def probe_mismatch(expected: list[float], actual: np.ndarray) -> float:
+    """Relative distance of two probe embeddings (0 for the same embedder and weights)."""
+    a, b = np.asarray(expected, dtype=np.float64), np.asarray(actual, dtype=np.float64)
+    if a.shape != b.shape:
+        return float("inf")
+    return float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12))
+
+
+#: Largest probe mismatch accepted: float32 differences across devices and BLAS are ~1e-6;
+#: another embedder or weights differ by order 1.
+PROBE_TOLERANCE = 1e-3
+
+
+class PosteriorEstimator:
+    """q(θ | s(x)): draws posterior samples of θ given an embedding.
+
+    Args:
+        config: What the estimator is for.
+        network: sbi's trained conditional density estimator (``torch.nn.Module``).
+        device: Torch device it lives on.
+    """
+
+    def __init__(self, config: EstimatorConfig, network: torch.nn.Module, device: str = "cpu") -> None:
+        from sbi.inference.posteriors import DirectPosterior
+
+        self.config = config
+        self.network = network.to(device).eval()
+        self.device = device
+        dim = len(config.parameters)
+        self.prior = uniform_prior(dim, device)
+        self._posterior = DirectPosterior(self.network, self.prior, device=device)
+
+    @property
+    def parameter_space(self) -> ParameterSpace:
+        """The parameter space θ lives in."""
+        return self.config.parameter_space
+
+    def sample_unit(self, x: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
+        """``(n, D)`` posterior samples in normalised coordinates for one embedding ``(E,)``."""
+        x = self._check_x(np.asarray(x, dtype=np.float32)[None])
+        torch.manual_seed(seed)
+        with torch.no_grad():
+            s = self._posterior.sample((n,), x=x, show_progress_bars=False)
+        return s.cpu().numpy().astype(np.float64)
+
+    def sample_unit_batched(self, xs: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
+        """``(n, B, D)`` samples for ``B`` embeddings ``(B, E)`` at once (calibration)."""
+        x = self._check_x(np.asarray(xs, dtype=np.float32))
+        torch.manual_seed(seed)
+        with torch.no_grad():
+            s = self._posterior.sample_batched((n,), x=x, show_progress_bars=False)
+        return s.cpu().numpy().astype(np.float64)
+
+    def _check_x(self, x: np.ndarray) -> torch.Tensor:
+        if x.ndim != 2 or x.shape[1] != self.config.x_dim:
+            raise UserInputError(
+                f"embedding of dimension {x.shape[-1]} given to an estimator trained on {self.config.x_dim}: "
+                f"embed with {self.config.embedder!r} reading {self.config.embedder_frames} frames"
+            )
+        if not np.isfinite(x).all():
+            raise UserInputError(
+                "the target's embedding is not finite (NaN or inf): the video may be blank, static or "
+                "damaged; check it plays and shows the phenomenon"
+            )
+        return torch.from_numpy(x).to(self.device)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the estimator as one safetensors file, atomically."""
+        from safetensors.torch import save_file
+
+        path = Path(path)
+        tensors = {k: v.detach().cpu().contiguous() for k, v in self.network.state_dict().items()}
+        config_json = json.dumps(self.config.to_dict(), sort_keys=True)
+        metadata = {"physinfer": config_json, "digest": _digest(tensors, config_json)}
+        with atomic_path(path, suffix=".safetensors") as tmp:
+            save_file(tensors, str(tmp), metadata=metadata)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path, device: str = "cpu") -> PosteriorEstimator:
+        """Read an estimator written by :meth:`save`, refusing damaged or edited files.
+
+        Raises:
+            UserInputError: the file is missing, not an estimator, or does not match its digest.
+        """
+        from safetensors import safe_open
+
+        path = Path(path)
+        if not path.is_file():
+            raise UserInputError(f"posterior estimator {path} does not exist; train one with `physinfer posterior train`")
+        try:
+            with safe_open(str(path), framework="pt", device="cpu") as f:
+                metadata = f.metadata() or {}
+                tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 - safe_open has no items()
+        except Exception as exc:  # safetensors raises its own error types for malformed files
+            raise UserInputError(f"{path} is not a readable posterior estimator file ({exc})") from None
+        config_json = metadata.get("physinfer")
+        if config_json is None:
+            raise UserInputError(f"{path} is a safetensors file but not a physinfer posterior estimator")
+        if metadata.get("digest") != _digest(tensors, config_json):
+            raise UserInputError(
+                f"{path} has been modified since it was written (its digest does not match); "
+                "re-train it with `physinfer posterior train`"
+            )
+        try:
+            raw = json.loads(config_json)
+            if raw.get("format") != FORMAT_NAME or raw.get("version") != FORMAT_VERSION:
+                raise UserInputError(
+                    f"{path}: format {raw.get('format')!r} version {raw.get('version')!r} is not "
+                    f"{FORMAT_NAME!r} version {FORMAT_VERSION}; re-train it with this physinfer"
+                )
+            config = EstimatorConfig.from_dict(raw)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserInputError(f"{path}: damaged estimator configuration ({exc})") from None
+        network = build_network(config)
+        try:
+            network.load_state_dict(tensors, strict=True)
+        except RuntimeError as exc:
+            raise UserInputError(f"{path}: the weights do not fit the network its configuration names ({exc})") from None
+        return cls(config, network, device)
+
+    def check_for(self, plugin: str, parameter_space: ParameterSpace, path: str | Path = "") -> None:
+        """Refuse an estimator made for another phenomenon or parameter space.
+
+        Raises:
+            UserInputError: naming what differs and how to get a matching estimator.
+        """
+        where = f"{path} " if path else ""
+        if self.config.plugin != plugin:
+            raise UserInputError(
+                f"the posterior estimator {where}was trained for --plugin {self.config.plugin}, not {plugin}; "
+                f"train one for {plugin} with `physinfer posterior train --plugin {plugin}`"
+            )
+        mine, theirs = self.parameter_space, parameter_space
+        if mine.to_dict() != theirs.to_dict():
+            diff = _space_difference(mine, theirs)
+            raise UserInputError(
+                f"the posterior estimator {where}was trained on another parameter space ({diff}); "
+                "train one on a dataset of this model (same effects, nothing --fix'ed)"
+            )
+
+    def check_embedder(self, embedder: Any) -> None:
+        """Refuse an embedder whose fingerprint differs from the one the estimator was trained with."""
+        mismatch = probe_mismatch(self.config.probe, embedder_probe(embedder))
+        if mismatch > PROBE_TOLERANCE:
+            raise UserInputError(
+                f"the embedder {self.config.embedder!r} here embeds differently from the one the estimator "
+                f"was trained with (probe differs by {mismatch:.2g}): other weights or another version; "
+                "pass the same --weights, or re-train the estimator"
+            )
+
+
+def resolve_device(device: str | None) -> str:
+    """``device`` checked (:func:`physinfer.devices.check_device`); ``None``: ``"cuda"``
+    when a GPU is visible, else ``"cpu"``."""
+    from physinfer.devices import check_device
+
+    checked = check_device(device)
+    if checked is None:
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return checked
+
+
+def uniform_prior(dim: int, device: str = "cpu") -> Any:
+    """sbi's ``BoxUniform`` on ``[-1, 1]^dim``: the normalised parameter cube."""
+    from sbi.utils import BoxUniform
+
+    return BoxUniform(-torch.ones(dim, device=device), torch.ones(dim, device=device), device=device)
+
+
+def build_network(config: EstimatorConfig) -> torch.nn.Module:
+    """An untrained network of ``config``'s shape (its z-scoring is replaced on loading)."""
+    gen = torch.Generator().manual_seed(0)
+    dim = len(config.parameters)
+    theta = torch.rand(16, dim, generator=gen) * 2 - 1
+    x = torch.randn(16, config.x_dim, generator=gen)
+    return config.network.builder()(theta, x)
+
+
+def _digest(tensors: Mapping[str, torch.Tensor], config_json: str) -> str:
+    h = hashlib.sha256(config_json.encode())
+    for name in sorted(tensors):
+        t = tensors[name].detach().cpu().contiguous()
+        h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.numpy().tobytes() if t.dtype != torch.bfloat16 else t.float().numpy().tobytes())
+    return "sha256:" + h.hexdigest()
+
+
+def _space_difference(mine: ParameterSpace, theirs: ParameterSpace) -> str:
+    extra, missing = set(mine.names) - set(theirs.names), set(theirs.names) - set(mine.names)
+    parts = []
+    if extra:
+        parts.append(f"it infers {', '.join(sorted(extra))}, which this model lacks")
+    if missing:
+        parts.append(f"it lacks {', '.join(sorted(missing))}")
+    for name in sorted(set(mine.names) & set(theirs.names)):
+        if mine[name].to_dict() != theirs[name].to_dict():
+            parts.append(f"{name}: its range {tuple(mine[name].bounds)}, here {tuple(theirs[name].bounds)}")
+    return "; ".join(parts) or "parameter order differs"

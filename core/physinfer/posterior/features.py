@@ -1,0 +1,155 @@
+"""The (θ, embedding) pairs a posterior estimator learns from, cached beside the dataset.
+
+A dataset made by ``physinfer dataset generate`` stores clips and the θ each was simulated
+at. Training an estimator needs each clip's embedding ``s(x)``; embedding is the slow part
+(seconds per clip for the flag's front end), so it is done once per (embedder, frames,
+weights, dataset) and kept in ``DATASET/embeddings/<key>-<split>.npz``. An interrupted
+embedding resumes from its last saved chunk (``.partial.npz``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.datasets.loader import ClipDataset
+from physinfer.datasets.storage import MANIFEST_FILE, file_digest
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_save_npz
+from physinfer.parameters import ParameterSpace
+from physinfer.roles import Embedder
+from physinfer.types import Clip
+
+CACHE_DIR = "embeddings"
+#: Clips embedded between two saves of a partial cache.
+CHUNK = 32
+
+
+@dataclass(frozen=True)
+class EmbeddedSet:
+    """The embedded clips of one dataset split.
+
+    Attributes:
+        parameter_space: The space θ was drawn from (the dataset's).
+        theta_unit: ``(N, D)`` float32 θ normalised to ``[-1, 1]``.
+        x: ``(N, E)`` float32 embeddings.
+        sim_ids: ``(N,)`` simulation id of each clip.
+        cache: The cache file the pairs came from (or were written to).
+    """
+
+    parameter_space: ParameterSpace
+    theta_unit: np.ndarray
+    x: np.ndarray
+    sim_ids: np.ndarray
+    cache: Path
+
+    def __len__(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def theta(self) -> np.ndarray:
+        """``(N, D)`` θ in physical units."""
+        return np.stack(
+            [spec.from_unit(self.theta_unit[:, i]) for i, spec in enumerate(self.parameter_space)], axis=1
+        )
+
+
+def cache_key(dataset: ClipDataset, embedder_info: Mapping[str, Any]) -> str:
+    """A short hash naming what the cached embeddings depend on: the dataset's manifest
+    and the embedder's identity (name, frames, weights digest)."""
+    ident = {"manifest": file_digest(dataset.root / MANIFEST_FILE), "embedder": dict(embedder_info)}
+    return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def embed_dataset(
+    root: str | Path,
+    split: str,
+    embedder: Embedder,
+    embedder_info: Mapping[str, Any],
+    *,
+    on_progress: Callable[[int, int], None] | None = None,
+) -> EmbeddedSet:
+    """Embed every clip of ``split`` (or read the cache), resuming a partial cache.
+
+    Args:
+        root: Dataset directory.
+        split: ``"train"``, ``"val"`` or ``"test"``.
+        embedder: The embedder the estimator will use at inference.
+        embedder_info: JSON-ready identity of ``embedder`` (name, frames, weights digest):
+            a different identity gets its own cache file.
+        on_progress: Called as ``(done, total)`` after each chunk.
+
+    Raises:
+        UserInputError: an empty split, or clips whose embedding is not finite.
+    """
+    dataset = ClipDataset(root, split)
+    if len(dataset) == 0:
+        raise UserInputError(
+            f"split {split!r} of {dataset.root} holds no clips; generate it with --sims TRAIN,VAL,TEST"
+        )
+    key = cache_key(dataset, embedder_info)
+    final = dataset.root / CACHE_DIR / f"{key}-{split}.npz"
+    partial = final.with_suffix(".partial.npz")
+    done_x = _read_cached(final if final.is_file() else partial, len(dataset))
+    total = len(dataset)
+    if len(done_x) < total:
+        parts = [done_x] if len(done_x) else []
+        done = len(done_x)
+        while done < total:
+            stop = min(done + CHUNK, total)
+            parts.append(_embed_range(dataset, embedder, done, stop))
+            done = stop
+            x = np.concatenate(parts)
+            atomic_save_npz(final if done == total else partial, x=x, key=np.array(key))
+            if on_progress is not None:
+                on_progress(done, total)
+        partial.unlink(missing_ok=True)
+        done_x = x
+    elif on_progress is not None:
+        on_progress(total, total)
+    return EmbeddedSet(
+        dataset.parameter_space,
+        dataset.params_unit.astype(np.float32),
+        done_x,
+        dataset.sim_ids.copy(),
+        final,
+    )
+
+
+def _read_cached(path: Path, total: int) -> np.ndarray:
+    """The embeddings saved in ``path`` (none when it does not exist or is damaged)."""
+    if not path.is_file():
+        return np.zeros((0, 0), dtype=np.float32)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            x = np.asarray(data["x"], dtype=np.float32)
+    except (OSError, ValueError, KeyError):
+        return np.zeros((0, 0), dtype=np.float32)  # re-embed rather than trust a damaged file
+    return x if x.ndim == 2 and len(x) <= total else np.zeros((0, 0), dtype=np.float32)
+
+
+def _embed_range(dataset: ClipDataset, embedder: Embedder, start: int, stop: int) -> np.ndarray:
+    clips = [_as_clip(dataset[i], dataset.fps) for i in range(start, stop)]
+    x = np.asarray(embedder.embed_many(clips), dtype=np.float32)
+    bad = ~np.isfinite(x).all(axis=1)
+    if bad.any():
+        first = start + int(np.flatnonzero(bad)[0])
+        raise UserInputError(
+            f"the embedding of clip {first} of {dataset.root} is not finite; the clip may be blank or "
+            "damaged (re-generate the dataset) or the embedder unsuited to it"
+        )
+    return x
+
+
+def _as_clip(frames: np.ndarray, fps: float) -> Clip:
+    """A stored ``(T, H, W)`` or ``(T, H, W, 3)`` uint8 clip as a :class:`Clip`."""
+    frames = np.asarray(frames)
+    if frames.ndim == 3:
+        frames = frames[..., None]
+    return Clip(frames, fps)

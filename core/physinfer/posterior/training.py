@@ -1,0 +1,142 @@
+"""Training an amortized posterior with sbi's NPE on cached (θ, embedding) pairs.
+
+sbi trains the density estimator; physinfer only feeds it the pairs, seeds it, and steps
+it a few epochs at a time (``resume_training``) so a progress callback can report the
+validation loss. Retraining from the cached embeddings takes minutes on 2 CPU cores, so a
+killed training is redone rather than resumed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import torch
+
+from physinfer.errors import UserInputError
+from physinfer.posterior.estimator import (
+    EstimatorConfig,
+    NetworkConfig,
+    PosteriorEstimator,
+    uniform_prior,
+)
+from physinfer.posterior.features import EmbeddedSet
+
+#: Epochs between two progress reports.
+EPOCHS_PER_REPORT = 5
+#: Fewer pairs than this cannot train a flow that says anything.
+MIN_PAIRS = 50
+
+
+def train_estimator(
+    pairs: EmbeddedSet,
+    identity: Mapping[str, Any],
+    *,
+    network: NetworkConfig | None = None,
+    seed: int = 0,
+    device: str = "cpu",
+    on_epoch: Callable[[int, int, float], None] | None = None,
+) -> PosteriorEstimator:
+    """Train q(θ | s(x)) on ``pairs`` with sbi's NPE.
+
+    Args:
+        pairs: θ (normalised) and embeddings of the training clips.
+        identity: The :class:`EstimatorConfig` fields naming plugin, embedder (name, frames,
+            fps, probe) and clip length.
+        network: Density estimator and training settings.
+        seed: Seeds torch (initialisation, batches, the validation split).
+        device: Torch device to train on.
+        on_epoch: Called as ``(epochs_done, max_epochs, best_validation_loss)``.
+
+    Raises:
+        UserInputError: too few pairs, or settings sbi cannot use.
+    """
+    from sbi.inference import NPE
+
+    network = network or NetworkConfig()
+    network.validate()
+    if len(pairs) < MIN_PAIRS:
+        raise UserInputError(
+            f"{len(pairs)} training clips are too few for a posterior estimator (at least {MIN_PAIRS}); "
+            "generate more with `physinfer dataset generate --sims N`"
+        )
+    torch.manual_seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 - sbi draws its validation split from torch and numpy
+    theta = torch.from_numpy(np.asarray(pairs.theta_unit, dtype=np.float32))
+    x = torch.from_numpy(np.asarray(pairs.x, dtype=np.float32))
+    prior = uniform_prior(theta.shape[1], device)
+    inference = NPE(
+        prior=prior, density_estimator=network.builder(), device=device, show_progress_bars=False,
+        tracker=_NoTracker(),
+    )  # fmt: skip
+    inference.append_simulations(theta, x)
+    settings = {
+        "training_batch_size": network.batch_size,
+        "learning_rate": network.learning_rate,
+        "validation_fraction": network.validation_fraction,
+        "stop_after_epochs": network.stop_after_epochs,
+        "show_train_summary": False,
+    }
+    estimator = _quiet(inference.train, max_num_epochs=EPOCHS_PER_REPORT, **settings)
+    while True:
+        best = float(inference._summary["best_validation_loss"][-1])
+        if on_epoch is not None:
+            on_epoch(inference.epoch, network.max_epochs, best)
+        # sbi keeps the best weights at the end of every call; it has converged once the
+        # validation loss has not improved for the patience.
+        stalled = inference._epochs_since_last_improvement >= network.stop_after_epochs
+        if stalled or inference.epoch >= network.max_epochs:
+            break
+        target = min(inference.epoch + EPOCHS_PER_REPORT, network.max_epochs)
+        estimator = _quiet(inference.train, max_num_epochs=target, resume_training=True, **settings)
+    summary = inference._summary
+    training = {
+        "pairs": len(pairs),
+        "epochs": int(inference.epoch),
+        "best_validation_loss": float(summary["best_validation_loss"][-1]),
+        "seed": seed,
+        "device": device,
+    }
+    config = EstimatorConfig(
+        **dict(identity),
+        parameters=pairs.parameter_space.to_dict(),
+        x_dim=int(x.shape[1]),
+        network=network,
+    )
+    config = replace(config, training={**config.training, **training})
+    return PosteriorEstimator(config, estimator.cpu(), "cpu")
+
+
+def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
+    """Call sbi's ``train`` without its prints on stdout (``--json`` owns stdout) and without
+    its "maximum epochs reached" warning, which every chunk of epochs but the last raises."""
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*Maximum number of epochs.*")
+        return train(**kwargs)
+
+
+class _NoTracker:
+    """sbi's tracker protocol, keeping nothing: its default writes TensorBoard logs into
+    ``./sbi-logs``, outside the run's ``--out``."""
+
+    log_dir = None
+
+    def log_metric(self, name: str, value: float, step: int | None = None) -> None:
+        pass
+
+    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
+        pass
+
+    def log_params(self, params: Mapping[str, Any]) -> None:
+        pass
+
+    def add_figure(self, name: str, figure: Any, step: int | None = None) -> None:
+        pass
+
+    def flush(self) -> None:
+        pass

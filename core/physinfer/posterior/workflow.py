@@ -1,0 +1,494 @@
+"""Posterior workflows over the roles: train an estimator on a dataset, infer the
+posterior of one video, and check calibration on held-out simulations.
+
+Each returns a result object with the numbers, the files it wrote and ``to_dict()`` (the
+JSON the CLI prints). Progress goes to an injected ``progress(stage, done, total)``
+callback; nothing here prints.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_save_npz, atomic_write_json
+from physinfer.posterior.estimator import (
+    NetworkConfig,
+    PosteriorEstimator,
+    embedder_probe,
+    resolve_device,
+)
+from physinfer.posterior.summary import correlations, marginals
+from physinfer.registry import Registry
+
+#: ``progress(stage, done, total)``.
+ProgressFn = Callable[[str, int, int], None]
+
+
+def _no_progress(stage: str, done: int, total: int) -> None:
+    pass
+
+
+# ------------------------------------------------------------------------------ train
+
+
+@dataclass
+class TrainResult:
+    """A trained estimator and where it was written."""
+
+    estimator: PosteriorEstimator
+    path: Path
+    cache: Path
+    seconds: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer posterior train --json`` prints."""
+        c = self.estimator.config
+        return {
+            "estimator": str(self.path),
+            "plugin": c.plugin,
+            "embedder": c.embedder,
+            "embedder_frames": c.embedder_frames,
+            "clip_seconds": c.clip_seconds,
+            "parameters": [p["name"] for p in c.parameters],
+            "training": c.training,
+            "embeddings_cache": str(self.cache),
+            "seconds": self.seconds,
+        }
+
+
+def build_embedder(
+    registry: Registry,
+    plugin: str,
+    *,
+    embedder: str | None,
+    embedder_frames: int | None,
+    weights: Path | None,
+    device: str | None,
+) -> Any:
+    """The pipeline (simulator, renderer, embedder) of ``plugin`` with the chosen embedder."""
+    from physinfer.session import build_pipeline
+
+    return build_pipeline(
+        registry, plugin, embedder=embedder, weights=weights, device=device, embedder_frames=embedder_frames
+    )
+
+
+def train_posterior(
+    registry: Registry,
+    *,
+    plugin: str,
+    data: Path,
+    out: Path,
+    embedder: str | None = None,
+    embedder_frames: int | None = None,
+    weights: Path | None = None,
+    device: str | None = None,
+    split: str = "train",
+    network: NetworkConfig | None = None,
+    seed: int = 0,
+    progress: ProgressFn = _no_progress,
+) -> TrainResult:
+    """Embed a dataset's clips (cached beside it) and train q(θ | s(x)) with sbi's NPE.
+
+    Raises:
+        UserInputError: a dataset of another phenomenon or without θ, clips shorter than
+            the embedder reads, or too few clips.
+    """
+    from physinfer.datasets.loader import ClipDataset
+    from physinfer.posterior.features import embed_dataset
+    from physinfer.posterior.training import train_estimator
+    network = network or NetworkConfig()
+    network.validate()  # before the slow embedding
+    out = _estimator_path(out)
+    dataset = ClipDataset(data, split)
+    _check_dataset(dataset, plugin)
+    pipeline = build_embedder(
+        registry, plugin, embedder=embedder, embedder_frames=embedder_frames, weights=weights, device=device
+    )
+    emb = pipeline.embedder
+    name = embedder or pipeline.phenomenon.default_embedder
+    clip_seconds = dataset.clip_format.n_frames / dataset.clip_format.fps
+    if clip_seconds + 1e-9 < emb.n_frames / emb.fps:
+        raise UserInputError(
+            f"the clips of {data} last {clip_seconds:.2f} s but the embedder {name!r} reads "
+            f"{emb.n_frames} frames at {emb.fps:g} fps ({emb.n_frames / emb.fps:.2f} s); generate longer "
+            "clips (dataset generate --frames N) or lower --embedder-frames"
+        )
+    probe = embedder_probe(emb)
+    identity = {
+        "plugin": plugin,
+        "embedder": name,
+        "embedder_frames": int(emb.n_frames),
+        "embedder_fps": float(emb.fps),
+        "frames_option": embedder_frames,
+        "weights": str(weights) if weights else None,
+        "probe": [float(v) for v in probe],
+        "clip_seconds": float(clip_seconds),
+    }
+    t0 = time.perf_counter()
+    pairs = embed_dataset(
+        data,
+        split,
+        emb,
+        {k: identity[k] for k in ("embedder", "embedder_frames", "embedder_fps", "probe")},
+        on_progress=lambda done, total: progress("embedding", done, total),
+    )
+    t1 = time.perf_counter()
+    estimator = train_estimator(
+        pairs,
+        identity,
+        network=network,
+        seed=seed,
+        device=resolve_device(device),
+        on_epoch=lambda done, total, best: progress("training", done, total),
+    )
+    estimator.config.training.update(dataset=str(Path(data).resolve().name), split=split)
+    t2 = time.perf_counter()
+    estimator.save(out)
+    pipeline.renderer.close()
+    return TrainResult(estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1})
+
+
+def _estimator_path(out: Path) -> Path:
+    out = Path(out)
+    if out.suffix != ".safetensors":
+        raise UserInputError(f"--out {out}: name the estimator file *.safetensors")
+    if out.is_dir():
+        raise UserInputError(f"--out {out} is a directory; give a file name ending in .safetensors")
+    return out
+
+
+def _check_dataset(dataset: Any, plugin: str) -> None:
+    made_for = dataset.info.get("config", {}).get("phenomenon")
+    if made_for not in (None, plugin):
+        raise UserInputError(
+            f"{dataset.root} was generated for --plugin {made_for}, not {plugin}; pass --plugin {made_for}"
+        )
+    if not dataset.param_names:
+        raise UserInputError(f"{dataset.root} stores no parameters θ: a posterior needs them")
+
+
+# ------------------------------------------------------------------------------ infer
+
+
+def load_estimator(
+    registry: Registry, plugin: str, path: Path | None, device: str | None = None
+) -> tuple[PosteriorEstimator, Path]:
+    """The estimator at ``path`` or the phenomenon's shipped one, checked against ``plugin``.
+
+    Raises:
+        UserInputError: no estimator given and none shipped, or one made for another
+            phenomenon or parameter space.
+    """
+    phenomenon = registry.phenomenon(plugin)
+    if path is None:
+        shipped = getattr(phenomenon, "default_posterior", None)
+        if shipped is None or not Path(shipped).is_file():
+            raise UserInputError(
+                f"the plugin {plugin!r} ships no posterior estimator; train one with `physinfer posterior "
+                f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
+            )
+        path = Path(shipped)
+    estimator = PosteriorEstimator.load(path, device=resolve_device(device))
+    estimator.check_for(plugin, phenomenon.parameter_space, path)
+    return estimator, Path(path)
+
+
+def estimator_embedder(registry: Registry, estimator: PosteriorEstimator, device: str | None) -> Any:
+    """The embedder ``estimator`` was trained with, rebuilt and fingerprint-checked."""
+    c = estimator.config
+    pipeline = build_embedder(
+        registry,
+        c.plugin,
+        embedder=c.embedder,
+        embedder_frames=c.frames_option,
+        weights=Path(c.weights) if c.weights else None,
+        device=device,
+    )
+    estimator.check_embedder(pipeline.embedder)
+    return pipeline
+
+
+def embed_target(estimator: PosteriorEstimator, embedder: Any, clip: Any) -> np.ndarray:
+    """``(E,)`` the target's embedding by the estimator's embedder, with a clear error when
+    the target is shorter than the clips the estimator was trained on."""
+    c = estimator.config
+    if clip.duration + 1e-6 < c.embedder_frames / c.embedder_fps:
+        raise UserInputError(
+            f"the target lasts {clip.duration:.2f} s but the posterior estimator reads {c.embedder_frames} "
+            f"frames at {c.embedder_fps:g} fps ({c.embedder_frames / c.embedder_fps:.2f} s); use a longer "
+            "video, or an estimator trained on shorter clips"
+        )
+    x = np.asarray(embedder.embed(clip), dtype=np.float32)
+    if not np.isfinite(x).all():
+        raise UserInputError(
+            "the target's embedding is not finite (NaN or inf): the video may be blank or damaged"
+        )
+    return x
+
+
+@dataclass
+class PosteriorReport:
+    """The posterior of one target: marginals, correlations and the samples.
+
+    Attributes:
+        marginals: ``{name: {median, ci50, ci90, contraction, label, unit}}``.
+        correlations: Strongest pairs ``[{a, b, r}]``.
+        samples_unit: ``(S, D)`` samples in normalised coordinates.
+        names: ``(D,)`` parameter names.
+        estimator: Path of the estimator used.
+        truth: Known true values, if any.
+        paths: Files written.
+        seconds: Time per stage.
+    """
+
+    marginals: dict[str, dict[str, Any]]
+    correlations: list[dict[str, Any]]
+    samples_unit: np.ndarray
+    names: list[str]
+    estimator: Path
+    truth: dict[str, float] | None = None
+    paths: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer infer --json`` prints (and ``posterior.json``)."""
+        d: dict[str, Any] = {
+            "posterior": self.marginals,
+            "correlations": self.correlations,
+            "estimator": str(self.estimator),
+            "n_samples": int(len(self.samples_unit)),
+            "files": self.paths,
+            "seconds": self.seconds,
+        }
+        if self.truth:
+            d["truth"] = self.truth
+            d["truth_in_ci90"] = {
+                name: bool(m["ci90"][0] <= self.truth[name] <= m["ci90"][1])
+                for name, m in self.marginals.items()
+                if name in self.truth
+            }
+        return d
+
+
+def posterior_of_clip(
+    estimator: PosteriorEstimator, embedder: Any, clip: Any, *, n_samples: int = 10000, seed: int = 0
+) -> PosteriorReport:
+    """Sample the posterior of one clip and summarise it."""
+    t0 = time.perf_counter()
+    x = embed_target(estimator, embedder, clip)
+    t1 = time.perf_counter()
+    samples = estimator.sample_unit(x, n_samples, seed=seed)
+    t2 = time.perf_counter()
+    space = estimator.parameter_space
+    report = PosteriorReport(
+        marginals=marginals(samples, space),
+        correlations=correlations(samples, space.names),
+        samples_unit=samples,
+        names=space.names,
+        estimator=Path("."),
+        seconds={"embed": t1 - t0, "sample": t2 - t1},
+    )
+    return report
+
+
+def infer(
+    registry: Registry,
+    *,
+    plugin: str,
+    out: Path,
+    target_path: Path | None = None,
+    posterior: Path | None = None,
+    fps: float | None = None,
+    truth: Sequence[str] = (),
+    n_samples: int = 10000,
+    seed: int = 0,
+    device: str | None = None,
+) -> PosteriorReport:
+    """The posterior of one video (default: the plugin's embedded target), written to ``out``:
+    ``posterior.json``, ``samples.npz`` and ``corner.png``.
+
+    Raises:
+        UserInputError: a mismatched or damaged estimator, a target too short for it, an
+            unreadable video.
+    """
+    from physinfer.session import load_target
+
+    if n_samples < 100:
+        raise UserInputError(f"--samples {n_samples}: at least 100 samples are needed for intervals")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UserInputError(f"--out {out} is a file; give a directory for the posterior's files")
+    t_start = time.perf_counter()
+    estimator, path = load_estimator(registry, plugin, posterior, device)
+    pipeline = estimator_embedder(registry, estimator, device)
+    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set={})
+    t_ready = time.perf_counter()
+    report = posterior_of_clip(estimator, pipeline.embedder, target.clip, n_samples=n_samples, seed=seed)
+    report.estimator = path
+    report.truth = dict(target.truth) if target.truth else None
+    report.seconds["start_up"] = t_ready - t_start
+    write_report(report, estimator, out, title=target.description)
+    pipeline.renderer.close()
+    return report
+
+
+def write_report(report: PosteriorReport, estimator: PosteriorEstimator, out: Path, *, title: str = "") -> None:
+    """``posterior.json``, ``samples.npz`` (physical and normalised) and ``corner.png`` in ``out``."""
+    from physinfer.posterior.figures import corner_plot
+
+    out.mkdir(parents=True, exist_ok=True)
+    space = estimator.parameter_space
+    physical = np.stack([spec.from_unit(report.samples_unit[:, i]) for i, spec in enumerate(space)], axis=1)
+    atomic_save_npz(
+        out / "samples.npz", names=np.array(report.names), samples=physical, samples_unit=report.samples_unit
+    )
+    report.paths["samples"] = str(out / "samples.npz")
+    report.paths["corner"] = str(corner_plot(report, space, out / "corner.png", title=title))
+    report.paths["posterior"] = str(out / "posterior.json")
+    atomic_write_json(out / "posterior.json", report.to_dict())
+
+
+# ------------------------------------------------------------------------- calibrate
+
+
+@dataclass
+class CalibrationReport:
+    """Simulation-based calibration of an estimator on a dataset split."""
+
+    calibration: Any
+    estimator: Path
+    data: Path
+    split: str
+    median_abs_error: dict[str, float]
+    contraction: dict[str, float]
+    paths: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer evaluate calibration --json`` prints."""
+        d = self.calibration.to_dict()
+        for name, row in d["parameters"].items():
+            row["median_abs_error"] = self.median_abs_error[name]
+            row["mean_contraction"] = self.contraction[name]
+        d.update(estimator=str(self.estimator), data=str(self.data), split=self.split)
+        d.update(files=self.paths, seconds=self.seconds)
+        return d
+
+
+def evaluate_calibration(
+    registry: Registry,
+    *,
+    plugin: str,
+    data: Path,
+    out: Path,
+    posterior: Path | None = None,
+    split: str = "test",
+    n_samples: int = 1000,
+    seed: int = 0,
+    device: str | None = None,
+    progress: ProgressFn = _no_progress,
+) -> CalibrationReport:
+    """Ranks, expected coverage, posterior-median errors and contraction on held-out clips.
+
+    The held-out clips are embedded with the estimator's own embedder (cached beside the
+    dataset like the training clips).
+    """
+    from physinfer.datasets.loader import ClipDataset
+    from physinfer.posterior.calibration import calibrate, plot_calibration
+    from physinfer.posterior.features import embed_dataset
+    from physinfer.posterior.summary import PRIOR_VARIANCE
+
+    if n_samples < 50:
+        raise UserInputError(f"--samples {n_samples}: at least 50 posterior samples per simulation are needed")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UserInputError(f"--out {out} is a file; give a directory for the calibration's files")
+    t0 = time.perf_counter()
+    estimator, path = load_estimator(registry, plugin, posterior, device)
+    dataset = ClipDataset(data, split)
+    _check_dataset(dataset, plugin)
+    if dataset.parameter_space.to_dict() != estimator.parameter_space.to_dict():
+        raise UserInputError(
+            f"{data} was drawn from another parameter space than the estimator's; calibrate on a dataset "
+            "of the same model"
+        )
+    pipeline = estimator_embedder(registry, estimator, device)
+    c = estimator.config
+    pairs = embed_dataset(
+        data,
+        split,
+        pipeline.embedder,
+        {"embedder": c.embedder, "embedder_frames": c.embedder_frames, "embedder_fps": c.embedder_fps, "probe": c.probe},
+        on_progress=lambda done, total: progress("embedding", done, total),
+    )
+    t1 = time.perf_counter()
+    names = estimator.parameter_space.names
+    medians = np.empty_like(pairs.theta_unit, dtype=np.float64)
+    variances = np.empty_like(medians)
+
+    def sampler(xs: np.ndarray, n: int, batch_seed: int) -> np.ndarray:
+        samples = estimator.sample_unit_batched(xs, n, seed=batch_seed)
+        return samples
+
+    cal = calibrate(
+        pairs.theta_unit.astype(np.float64),
+        pairs.x,
+        _recording(sampler, medians, variances),
+        names,
+        n_samples=n_samples,
+        seed=seed,
+        on_progress=lambda done, total: progress("sampling", done, total),
+    )
+    t2 = time.perf_counter()
+    space = estimator.parameter_space
+    truth = pairs.theta
+    med_phys = np.stack([spec.from_unit(medians[:, i]) for i, spec in enumerate(space)], axis=1)
+    report = CalibrationReport(
+        calibration=cal,
+        estimator=path,
+        data=Path(data),
+        split=split,
+        median_abs_error={n: float(np.median(np.abs(med_phys[:, i] - truth[:, i]))) for i, n in enumerate(names)},
+        contraction={n: float(np.mean(1 - variances[:, i] / PRIOR_VARIANCE)) for i, n in enumerate(names)},
+        seconds={"embed": t1 - t0, "calibrate": t2 - t1},
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    report.paths["plot"] = str(plot_calibration(cal, out / "calibration.png", title=f"{plugin}: {Path(data).name} ({split})"))
+    report.paths["report"] = str(out / "calibration.json")
+    atomic_write_json(out / "calibration.json", report.to_dict())
+    pipeline.renderer.close()
+    return report
+
+
+def _recording(
+    sampler: Callable[[np.ndarray, int, int], np.ndarray], medians: np.ndarray, variances: np.ndarray
+) -> Callable[[np.ndarray, int, int], np.ndarray]:
+    """Wrap ``sampler`` to keep each pair's posterior median and variance as batches pass."""
+    state = {"start": 0}
+
+    def wrapped(xs: np.ndarray, n: int, seed: int) -> np.ndarray:
+        samples = sampler(xs, n, seed)
+        start, stop = state["start"], state["start"] + len(xs)
+        medians[start:stop] = np.median(samples, axis=0)
+        variances[start:stop] = samples.var(axis=0)
+        state["start"] = stop
+        return samples
+
+    return wrapped
+
+
+def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Printed lines: identified parameters first, then weakly, then the rest."""
+    from physinfer.posterior.summary import format_marginal
+
+    order = {"identified": 0, "weakly identified": 1, "not identified": 2}
+    ranked = sorted(marginals_.items(), key=lambda kv: order[kv[1]["label"]])
+    return [format_marginal(name, m) for name, m in ranked]

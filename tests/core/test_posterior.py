@@ -1,0 +1,317 @@
+"""Tests of physinfer.posterior: the calibration check on a problem whose posterior is known,
+summaries and labels, safe saving and loading, and train → infer → calibrate through the CLI
+on a small generated pendulum dataset (sbi's NPE, the real embedder, no mocks)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer import ParameterSpace, ParameterSpec
+from physinfer.errors import UserInputError
+from physinfer.posterior.calibration import calibrate, coverage_from_ranks
+from physinfer.posterior.summary import correlations, identifiability_label, marginals
+
+BIN = Path(sys.executable).parent / "physinfer"
+
+# ------------------------------------------------- calibration on a linear-Gaussian toy
+
+SIGMA = 0.5  # x = θ + N(0, σ²), θ ~ N(0, 1): posterior N(x / (1 + σ²), σ² / (1 + σ²))
+
+
+def _toy(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    theta = rng.normal(size=(n, 2))
+    return theta, theta + SIGMA * rng.normal(size=(n, 2))
+
+
+def _gaussian_sampler(scale: float):
+    """Exact posterior samples, their spread multiplied by ``scale`` (1: exact)."""
+    post_sd = np.sqrt(SIGMA**2 / (1 + SIGMA**2))
+
+    def sample(xs: np.ndarray, n: int, seed: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        mean = xs / (1 + SIGMA**2)
+        return mean[None] + scale * post_sd * rng.normal(size=(n, *xs.shape))
+
+    return sample
+
+
+def test_calibration_finds_nominal_coverage_for_the_exact_posterior():
+    theta, x = _toy(1000)
+    cal = calibrate(theta, x, _gaussian_sampler(1.0), ["a", "b"], n_samples=500)
+    for level in (0.5, 0.9):
+        assert np.all(np.abs(cal.coverage[level] - level) <= cal.tolerance(level))
+        assert [cal.verdict(level, i) for i in range(2)] == ["calibrated", "calibrated"]
+    assert np.all(cal.ks_pvalue > 0.001)
+
+
+def test_calibration_detects_an_over_confident_and_an_under_confident_posterior():
+    theta, x = _toy(1000, seed=1)
+    narrow = calibrate(theta, x, _gaussian_sampler(0.5), ["a", "b"], n_samples=500)
+    # half the spread: the 90 % interval covers P(|Z| < 0.82) ≈ 0.59
+    assert np.all(narrow.coverage[0.9] < 0.7)
+    assert narrow.verdict(0.9, 0) == "over-confident"
+    assert np.all(narrow.ks_pvalue < 1e-6)
+    wide = calibrate(theta, x, _gaussian_sampler(2.0), ["a", "b"], n_samples=500)
+    assert np.all(wide.coverage[0.5] > 0.75)
+    assert wide.verdict(0.5, 1) == "under-confident"
+
+
+def test_coverage_from_ranks_counts_the_central_interval():
+    ranks = np.array([[0], [50], [99], [100]])
+    # quantiles (r + 0.5) / 101: 0.005, 0.5, 0.985, 0.995; only 0.5 lies within 0.05–0.95
+    assert coverage_from_ranks(ranks, 100, 0.9).tolist() == [0.25]
+    assert coverage_from_ranks(np.array([[50], [60]]), 100, 0.5).tolist() == [1.0]
+
+
+# ------------------------------------------------------------------ summaries and labels
+
+SPACE = ParameterSpace(
+    [
+        ParameterSpec("wind", (0.0, 10.0), "m/s"),
+        ParameterSpec("weight", (0.1, 0.2), "kg/m²", scaling="log"),
+        ParameterSpec("bend", (0.1, 10.0), "", scaling="log"),
+    ]
+)
+
+
+def test_marginals_label_by_contraction_and_report_intervals_in_physical_units():
+    rng = np.random.default_rng(0)
+    n = 20000
+    wind = np.clip(0.2 + 0.05 * rng.normal(size=n), -1, 1)  # sd 0.05 of the prior's 0.58
+    weight = rng.uniform(-0.6, 0.6, size=n)  # contraction 1 - 0.12 / 0.333 = 0.64
+    bend = rng.uniform(-1, 1, size=n)  # the prior itself
+    m = marginals(np.stack([wind, weight, bend], axis=1), SPACE)
+    assert m["wind"]["label"] == "identified"
+    assert m["weight"]["label"] == "weakly identified"
+    assert m["bend"]["label"] == "not identified"
+    assert m["wind"]["median"] == pytest.approx(6.0, abs=0.02)  # unit 0.2 → 6 m/s
+    lo, hi = m["wind"]["ci90"]
+    assert lo == pytest.approx(6.0 - 1.645 * 0.25, abs=0.03) and hi == pytest.approx(6.0 + 1.645 * 0.25, abs=0.03)
+    assert m["wind"]["ci50"][0] > lo and m["wind"]["ci50"][1] < hi
+    assert abs(m["bend"]["contraction"]) < 0.03
+    assert m["wind"]["unit"] == "m/s"
+
+
+def test_identifiability_thresholds():
+    assert identifiability_label(0.9) == "identified"
+    assert identifiability_label(0.75) == "identified"
+    assert identifiability_label(0.5) == "weakly identified"
+    assert identifiability_label(0.1) == "not identified"
+    assert identifiability_label(-0.2) == "not identified"
+
+
+def test_correlations_show_a_ridge_and_nothing_for_independent_parameters():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-1, 1, 5000)
+    samples = np.stack([a, -a + 0.1 * rng.normal(size=5000), rng.uniform(-1, 1, 5000)], axis=1)
+    pairs = correlations(samples, ["wind", "weight", "bend"])
+    assert len(pairs) == 1
+    assert (pairs[0]["a"], pairs[0]["b"]) == ("wind", "weight") and pairs[0]["r"] < -0.9
+
+
+# ----------------------------------------------------------------- saving and loading
+
+
+@pytest.fixture(scope="module")
+def toy_estimator():
+    """A small NPE (sbi, maf) trained on x = θ + noise in 2-D, in seconds."""
+    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.features import EmbeddedSet
+    from physinfer.posterior.training import train_estimator
+
+    space = ParameterSpace([ParameterSpec("a", (0.0, 1.0)), ParameterSpec("b", (1.0, 100.0), scaling="log")])
+    rng = np.random.default_rng(0)
+    theta = rng.uniform(-1, 1, size=(400, 2)).astype(np.float32)
+    x = np.concatenate([theta + 0.1 * rng.normal(size=theta.shape), rng.normal(size=(400, 1))], axis=1)
+    pairs = EmbeddedSet(space, theta, x.astype(np.float32), np.arange(400), Path("unused"))
+    identity = {
+        "plugin": "toy",
+        "embedder": "identity",
+        "embedder_frames": 10,
+        "embedder_fps": 25.0,
+        "probe": [0.0, 1.0, 2.0],
+        "clip_seconds": 0.4,
+    }
+    network = NetworkConfig(hidden_features=32, num_transforms=3, batch_size=50, learning_rate=2e-3, max_epochs=40)
+    return train_estimator(pairs, identity, network=network, seed=0, device="cpu")
+
+
+def test_an_estimator_round_trips_through_its_file_and_samples_alike(toy_estimator, tmp_path):
+    from physinfer.posterior.estimator import PosteriorEstimator
+
+    path = toy_estimator.save(tmp_path / "toy.safetensors")
+    loaded = PosteriorEstimator.load(path)
+    assert loaded.config == toy_estimator.config
+    x = np.array([0.5, -0.5, 0.0], dtype=np.float32)
+    np.testing.assert_allclose(loaded.sample_unit(x, 200, seed=3), toy_estimator.sample_unit(x, 200, seed=3), atol=1e-6)
+    samples = loaded.sample_unit(x, 4000, seed=0)
+    assert np.median(samples[:, 0]) == pytest.approx(0.5, abs=0.15)  # it learnt something
+    assert np.all(np.abs(samples) <= 1.0)  # inside the prior's box
+
+
+def test_a_modified_or_foreign_file_is_refused(toy_estimator, tmp_path):
+    from safetensors.numpy import save_file
+
+    from physinfer.posterior.estimator import PosteriorEstimator
+
+    path = toy_estimator.save(tmp_path / "toy.safetensors")
+    raw = bytearray(path.read_bytes())
+    raw[-5] ^= 0xFF  # one weight's byte
+    tampered = tmp_path / "tampered.safetensors"
+    tampered.write_bytes(bytes(raw))
+    with pytest.raises(UserInputError, match="modified"):
+        PosteriorEstimator.load(tampered)
+    cut = tmp_path / "cut.safetensors"
+    cut.write_bytes(bytes(raw[:100]))
+    with pytest.raises(UserInputError, match="not a readable posterior estimator"):
+        PosteriorEstimator.load(cut)
+    other = tmp_path / "other.safetensors"
+    save_file({"w": np.zeros(3, dtype=np.float32)}, str(other))
+    with pytest.raises(UserInputError, match="not a physinfer posterior estimator"):
+        PosteriorEstimator.load(other)
+    with pytest.raises(UserInputError, match="does not exist"):
+        PosteriorEstimator.load(tmp_path / "missing.safetensors")
+
+
+def test_an_estimator_for_another_plugin_or_parameter_space_is_refused(toy_estimator):
+    space = toy_estimator.parameter_space
+    toy_estimator.check_for("toy", space)  # its own: accepted
+    with pytest.raises(UserInputError, match="trained for --plugin toy, not flag"):
+        toy_estimator.check_for("flag", space)
+    wider = ParameterSpace([ParameterSpec("a", (0.0, 2.0)), space["b"]])
+    with pytest.raises(UserInputError, match=r"a: its range \(0.0, 1.0\), here \(0.0, 2.0\)"):
+        toy_estimator.check_for("toy", wider)
+    fewer = ParameterSpace([space["b"]])
+    with pytest.raises(UserInputError, match="this model lacks"):
+        toy_estimator.check_for("toy", fewer)
+
+
+def test_nan_or_wrong_sized_embeddings_are_refused(toy_estimator):
+    with pytest.raises(UserInputError, match="not finite"):
+        toy_estimator.sample_unit(np.array([np.nan, 0.0, 0.0]), 10)
+    with pytest.raises(UserInputError, match="dimension 2"):
+        toy_estimator.sample_unit(np.zeros(2), 10)
+
+
+# ------------------------------------------------------------- the pendulum, end to end
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+def json_of(proc: subprocess.CompletedProcess) -> dict:
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1, f"exit {proc.returncode}; stdout {proc.stdout!r}; stderr {proc.stderr[-2000:]}"
+    return json.loads(lines[0])
+
+
+@pytest.fixture(scope="module")
+def pendulum_set(tmp_path_factory) -> Path:
+    """A small generated pendulum dataset: 4-s clips, 48 px, 90 training and 30 test simulations."""
+    root = tmp_path_factory.mktemp("posterior") / "pendulum-set"
+    proc = run_cli(
+        "dataset", "generate", "--plugin", "pendulum", "--sims", "90,0,30", "--renders-per-sim", "1",
+        "--frames", "100", "--size", "48", "--workers", "0", "--seed", "5", "--out", str(root), "--json",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return root
+
+
+@pytest.fixture(scope="module")
+def pendulum_estimator(pendulum_set) -> tuple[Path, dict]:
+    out = pendulum_set.parent / "pendulum.safetensors"
+    proc = run_cli(
+        "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set), "--out", str(out),
+        "--max-epochs", "40", "--device", "cpu", "--json",
+    )  # fmt: skip
+    return out, json_of(proc)
+
+
+def test_train_writes_an_estimator_and_caches_the_embeddings(pendulum_set, pendulum_estimator):
+    out, summary = pendulum_estimator
+    assert out.is_file() and summary["estimator"] == str(out)
+    assert summary["plugin"] == "pendulum" and summary["embedder"] == "grid_spectrum"
+    assert summary["parameters"] == ["length", "damping", "amplitude"]
+    assert summary["training"]["pairs"] == 90 and 1 <= summary["training"]["epochs"] <= 41
+    cache = Path(summary["embeddings_cache"])
+    assert cache.parent == pendulum_set / "embeddings" and cache.is_file()
+    with np.load(cache, allow_pickle=False) as data:
+        assert data["x"].shape[0] == 90
+    # a second training reuses the cached embeddings (the same file, not rewritten)
+    stamp = cache.stat().st_mtime_ns
+    again = json_of(
+        run_cli(
+            "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set),
+            "--out", str(out.with_name("again.safetensors")), "--max-epochs", "5", "--json",
+        )  # fmt: skip
+    )
+    assert again["embeddings_cache"] == str(cache) and cache.stat().st_mtime_ns == stamp
+
+
+def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(pendulum_estimator, tmp_path):
+    path, _ = pendulum_estimator
+    out = tmp_path / "infer"
+    proc = run_cli("infer", "--plugin", "pendulum", "--posterior", str(path), "--samples", "2000", "--out", str(out), "--json")
+    report = json_of(proc)
+    assert set(report["posterior"]) == {"length", "damping", "amplitude"}
+    for m in report["posterior"].values():
+        assert set(m) == {"median", "ci50", "ci90", "contraction", "label", "unit"}
+        assert m["ci90"][0] <= m["ci50"][0] <= m["median"] <= m["ci50"][1] <= m["ci90"][1]
+        assert m["label"] in ("identified", "weakly identified", "not identified")
+    assert report["truth"] == {"length": 1.25, "damping": 0.12, "amplitude": 42.0}
+    assert set(report["truth_in_ci90"]) == {"length", "damping", "amplitude"}
+    assert isinstance(report["correlations"], list)
+    with np.load(out / "samples.npz", allow_pickle=False) as data:
+        assert data["samples"].shape == (2000, 3) and list(data["names"]) == ["length", "damping", "amplitude"]
+        assert data["samples"][:, 0].min() >= 0.4 and data["samples"][:, 0].max() <= 1.6
+    assert (out / "corner.png").stat().st_size > 1000
+    assert json.loads((out / "posterior.json").read_text())["posterior"] == report["posterior"]
+    human = run_cli("infer", "--plugin", "pendulum", "--posterior", str(path), "--samples", "500", "--out", str(out))
+    assert human.returncode == 0 and "length" in human.stderr and "identified" in human.stderr
+
+
+def test_evaluate_calibration_reports_coverage_per_parameter(pendulum_set, pendulum_estimator, tmp_path):
+    path, _ = pendulum_estimator
+    out = tmp_path / "cal"
+    proc = run_cli(
+        "evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(pendulum_set),
+        "--samples", "200", "--out", str(out), "--json",
+    )  # fmt: skip
+    report = json_of(proc)
+    assert report["n_pairs"] == 30 and report["split"] == "test"
+    for row in report["parameters"].values():
+        assert 0.0 <= row["coverage50"] <= row["coverage90"] <= 1.0
+        assert row["verdict90"] in ("calibrated", "over-confident", "under-confident")
+        assert {"ks_pvalue", "median_abs_error", "mean_contraction"} <= set(row)
+    assert (out / "calibration.png").stat().st_size > 1000 and (out / "calibration.json").is_file()
+
+
+def test_bad_input_to_the_posterior_commands_is_one_clear_error(pendulum_set, pendulum_estimator, tmp_path):
+    path, _ = pendulum_estimator
+    short = tmp_path / "short.mp4"
+    assert run_cli("simulate", "--plugin", "pendulum", "--out", str(short)).returncode == 0
+    from physinfer.video import read_video, write_video
+
+    clip = read_video(short)
+    write_video(short, clip.frames[:40], fps=clip.fps)  # 1.6 s of a 4-s estimator
+    cases = {
+        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--target", str(short)): "lasts 1.60 s",
+        ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum, not flag",
+        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--device", "tpu9"): "not a torch device",
+        ("infer", "--plugin", "pendulum"): "ships no posterior estimator",
+        ("posterior", "train", "--plugin", "flag", "--data", str(pendulum_set), "--out", str(tmp_path / "f.safetensors")): "generated for --plugin pendulum",
+        ("posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set), "--out", str(tmp_path / "f.pt")): "*.safetensors",
+        ("evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(tmp_path)): "not a dataset",
+    }  # fmt: skip
+    for args, message in cases.items():
+        proc = run_cli(*args, "--json", cwd=tmp_path)
+        assert proc.returncode == 2, (args, proc.stderr[-1500:])
+        assert message in json_of(proc)["error"], (args, proc.stdout)
