@@ -97,10 +97,26 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     if fixed:
         info["fixed"] = fixed
     factory = registry.get("optimizers", optimizer).load()
+    amortized = None
+    start = time.perf_counter()
+    if args.posterior:  # as `refine` does with an estimator: report its intervals, start at its median
+        from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.posterior.workflow import posterior_for_refinement
+
+        estimator = None if args.posterior == "shipped" else Path(args.posterior)
+        if estimator is None:
+            from physinfer.posterior.workflow import load_estimator
+
+            estimator = load_estimator(registry, args.plugin, None)[1]
+        amortized, _ = posterior_for_refinement(
+            registry, plugin=args.plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
+            posterior=estimator, seed=0,
+        )
+        medians = {name: m["median"] for name, m in amortized.marginals.items()}
+        factory = warm_start_factory(factory, pipeline.simulator.parameter_space.to_unit(medians))
     # The trials do not depend on the selection, so a finished run of the same settings is
     # continued (nothing re-simulated but the selection and the floor) instead of re-run.
     resume = args.reuse_trials and run_dir.run_file.is_file() and len(run_dir.read_trials()) >= args.steps
-    start = time.perf_counter()
     result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info, resume=resume)
     wall = time.perf_counter() - start
     floor = result.extra.get("noise_floor") or {}
@@ -118,7 +134,23 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         "n_failed": result.n_failed,
         "trials_reused": resume,
         "selection_s": (result.extra.get("selection") or {}).get("selection_s"),
+        **(_posterior_row(amortized, target.truth) if amortized is not None else {}),
     }
+
+
+def _posterior_row(report: Any, truth: dict) -> dict:
+    """The amortized posterior's wind and area-weight intervals, whether they cover the truth,
+    and the posterior median's errors."""
+    row: dict[str, Any] = {"posterior": {}}
+    for name in ("wind_speed", "area_weight"):
+        if name in report.marginals:
+            m = report.marginals[name]
+            row["posterior"][name] = {
+                "median": m["median"], "ci90": m["ci90"], "label": m["label"],
+                "covers": bool(m["ci90"][0] <= truth[name] <= m["ci90"][1]),
+                "median_abs_error": abs(m["median"] - truth[name]),
+            }
+    return row
 
 
 def _same_run(a: dict, b: dict) -> bool:
@@ -154,7 +186,8 @@ def logged_rows(log: Path, settings: dict) -> dict[tuple[int, str], dict]:
 
 
 def accuracy(rows: list[dict]) -> dict[str, Any]:
-    """Median errors and the share of wind errors within 0.5 m/s."""
+    """Median errors and the share of wind errors within 0.5 m/s (and, with a posterior, how
+    often its 90 % interval covered the true wind)."""
     wind = [r["abs_errors"]["wind_speed"] for r in rows if "wind_speed" in r["abs_errors"]]
     area = [r["abs_errors"]["area_weight"] for r in rows if "area_weight" in r["abs_errors"]]
     ratios = [r["noise_ratio"] for r in rows if r.get("noise_ratio") is not None]
@@ -165,6 +198,17 @@ def accuracy(rows: list[dict]) -> dict[str, Any]:
         "median_area_weight_abs_error": statistics.median(area) if area else None,
         "median_noise_ratio": statistics.median(ratios) if ratios else None,
         "median_wall_time_s": statistics.median(r["wall_time_s"] for r in rows),
+        **_coverage(rows),
+    }
+
+
+def _coverage(rows: list[dict]) -> dict[str, Any]:
+    with_posterior = [r["posterior"]["wind_speed"] for r in rows if "wind_speed" in r.get("posterior", {})]
+    if not with_posterior:
+        return {}
+    return {
+        "wind_ci90_covers": sum(p["covers"] for p in with_posterior),
+        "posterior_median_wind_abs_error": statistics.median(p["median_abs_error"] for p in with_posterior),
     }
 
 
@@ -192,6 +236,9 @@ def main() -> None:
                         help="continue finished runs in --out instead of re-running them (e.g. to add --select-top)")
     parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                         help="hold parameters fixed in the refinements, as `physinfer refine --fix` (repeatable)")
+    parser.add_argument("--posterior", default=None, metavar="shipped|FILE",
+                        help="refine as `refine --posterior` does: the target's amortized posterior (the plugin's "
+                        "shipped estimator, or FILE) gives the start and the intervals recorded per row")
     parser.add_argument("--out", default="runs/bench_refine")
     parser.add_argument("--shard", default="0/1", help="K/N: run only targets with index %% N == K, so N "
                         "processes (or machines sharing --out) split the work; the summary covers every row logged")
@@ -218,6 +265,8 @@ def main() -> None:
         del settings["embedder_frames"]  # and rows from before --embedder-frames
     if args.batch_size == 1:
         del settings["batch_size"]  # and rows from before --batch-size
+    if args.posterior is None:
+        del settings["posterior"]  # and rows from before --posterior
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):

@@ -18,7 +18,11 @@ from physinfer.rundir import TrialRecord  # noqa: E402
 
 
 def plot_refinement(
-    trials: Sequence[TrialRecord], truth: Mapping[str, float] | None, path: str | Path, max_params: int = 17
+    trials: Sequence[TrialRecord],
+    truth: Mapping[str, float] | None,
+    path: str | Path,
+    max_params: int = 17,
+    bands: Mapping[str, Mapping[str, object]] | None = None,
 ) -> Path:
     """Draw distance (and best so far) and every parameter against the step.
 
@@ -27,6 +31,9 @@ def plot_refinement(
         truth: Ground truth by name, drawn dashed; ``None`` for real targets.
         path: PNG to write (atomically).
         max_params: Parameters drawn at most (in space order).
+        bands: The posterior's marginals by name (``ci90`` and ``label``, see
+            :func:`physinfer.posterior.summary.marginals`): the 90 % interval is shaded
+            and the label added to the panel's title.
 
     Returns:
         ``path``.
@@ -51,10 +58,15 @@ def plot_refinement(
     ax.legend(fontsize=7)
     for ax, name in zip(axes.flat[1:], names, strict=False):
         ax.plot(steps, [t.params[name] for t in trials], "o-", ms=3, lw=1)
+        title = name
+        if bands and name in bands:
+            lo, hi = bands[name]["ci90"]  # type: ignore[misc]
+            ax.axhspan(lo, hi, color="tab:green", alpha=0.15, label="90 % posterior")
+            title = f"{name} ({bands[name]['label']})"
         if truth and name in truth:
             ax.axhline(truth[name], ls="--", color="k", lw=1, label="ground truth")
             ax.legend(fontsize=7)
-        ax.set_title(name, fontsize=9)
+        ax.set_title(title, fontsize=9)
         ax.set_xlabel("step")
     for ax in axes.flat[n_panels:]:
         ax.axis("off")

@@ -675,7 +675,9 @@ def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_
     best_traj.save(run_dir.path / "best_trajectory.npz")
     best_clip = pipeline.renderer.render(best_traj, target.render_params)
     write_video(run_dir.path / "side_by_side.mp4", side_by_side([target.clip, best_clip]))
-    plot_refinement(result.trials, result.ground_truth, run_dir.path / "refinement.png")
+    plot_refinement(
+        result.trials, result.ground_truth, run_dir.path / "refinement.png", bands=result.extra.get("posterior")
+    )
     result.extra.setdefault("outputs", {})
     result.extra["outputs"] = {
         name: str(run_dir.path / name)

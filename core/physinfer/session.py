@@ -197,8 +197,15 @@ def refine(
     scheduler: str | None = None,
     duration_s: float | None = None,
     embedder_frames: int | None = None,
+    posterior: Path | None = None,
+    use_posterior: bool = True,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
+
+    ``posterior`` is an estimator file from ``physinfer posterior train`` (``None``: the
+    phenomenon's shipped one, where it applies; ``use_posterior=False``: none): the
+    target's amortized posterior is reported beside the best fit (``result.json``
+    ``posterior`` and ``correlations``) and the search starts at its median.
 
     ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
     in and the refinement is warm-started from its values (and, unless ``duration_s`` or
@@ -241,6 +248,14 @@ def refine(
     )
     config.validate()
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
+    amortized, amortized_note = None, None
+    if use_posterior:
+        from physinfer.posterior.workflow import posterior_for_refinement
+
+        amortized, amortized_note = posterior_for_refinement(
+            registry, plugin=plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
+            posterior=posterior, device=device, seed=seed,
+        )  # fmt: skip
     if resume:
         stored = run_dir.load_run_info()
         if stored.get("target") not in (None, "default") and target_path is None:
@@ -268,6 +283,12 @@ def refine(
         space = pipeline.simulator.parameter_space
         start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
         factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
+    elif amortized is not None:  # spend the budget where the video points
+        from physinfer.diagnose.warmstart import warm_start_factory
+
+        medians = {name: m["median"] for name, m in amortized.marginals.items()}
+        factory = warm_start_factory(factory, pipeline.simulator.parameter_space.to_unit(medians))
+        run_info["start"] = {"posterior_median": str(amortized.estimator)}
     from physinfer.trial_workers import PipelineSpec, trial_workers
 
     spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)
@@ -285,6 +306,12 @@ def refine(
             result.extra["fixed"] = fixed_values
         if executor is not None:
             result.extra["executor"] = executor
+        if amortized is not None:
+            result.extra["posterior"] = amortized.marginals
+            result.extra["correlations"] = amortized.correlations
+            result.extra["posterior_source"] = {"kind": "amortized", "estimator": str(amortized.estimator)}
+        elif amortized_note:
+            result.extra["posterior_note"] = amortized_note
         write_video(run_dir.path / TARGET_FILE, target.clip)
         write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()

@@ -315,3 +315,28 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(pendulum_set, pe
         proc = run_cli(*args, "--json", cwd=tmp_path)
         assert proc.returncode == 2, (args, proc.stderr[-1500:])
         assert message in json_of(proc)["error"], (args, proc.stdout)
+
+
+def test_refine_reports_the_targets_posterior_and_starts_at_its_median(pendulum_estimator, tmp_path):
+    path, _ = pendulum_estimator
+    out = tmp_path / "run"
+    proc = run_cli(
+        "refine", "--plugin", "pendulum", "--posterior", str(path), "--steps", "4", "--noise-samples", "0",
+        "--floor-samples", "0", "--out", str(out), "--json",
+    )  # fmt: skip
+    result = json_of(proc)
+    assert set(result["posterior"]) == {"length", "damping", "amplitude"}
+    assert result["posterior_source"] == {"kind": "amortized", "estimator": str(path)}
+    assert isinstance(result["correlations"], list)
+    assert json.loads((out / "result.json").read_text())["posterior"] == result["posterior"]
+    # the first trial is the posterior median (the warm start), not the centre of the space
+    first = json.loads((out / "trials.jsonl").read_text().splitlines()[0])["params"]
+    for name, m in result["posterior"].items():
+        assert first[name] == pytest.approx(m["median"], rel=1e-6)
+    # a model the estimator was not trained for is refused before any simulation
+    drag = run_cli(
+        "refine", "--plugin", "pendulum", "--posterior", str(path), "--effect", "quadratic_drag", "--steps", "2",
+        "--out", str(tmp_path / "drag"), "--json",
+    )  # fmt: skip
+    assert drag.returncode == 2 and "drag_quadratic" in json_of(drag)["error"]
+    assert not (tmp_path / "drag" / "trials.jsonl").exists()

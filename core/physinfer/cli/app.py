@@ -375,6 +375,17 @@ def refine_cmd(
     ] = None,
     duration: DurationOpt = None,
     embedder_frames: EmbedderFramesOpt = None,
+    posterior: Annotated[
+        Path | None,
+        typer.Option(
+            "--posterior",
+            help="Posterior estimator (`physinfer posterior train`): report the target's posterior "
+            "and start the search at its median. Default: the plugin's shipped one, where it applies.",
+        ),
+    ] = None,
+    no_posterior: Annotated[
+        bool, typer.Option("--no-posterior", help="Use no posterior estimator (a best fit only).")
+    ] = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -415,6 +426,8 @@ def refine_cmd(
         scheduler=scheduler,
         duration_s=duration,
         embedder_frames=embedder_frames,
+        posterior=posterior,
+        use_posterior=not no_posterior,
     )
     summary = result.summary()
     if as_json:
@@ -422,13 +435,13 @@ def refine_cmd(
         return
     err_console.print(f"[bold]best distance[/] {result.best_distance:.4g} at step {result.best_step}")
     at_bounds = result.extra.get("at_bounds", {})
+    marginals = result.extra.get("posterior") or {}
     for name, value in result.best_params.items():
-        line = f"  {name} = {value:.4g}"
-        if result.abs_errors and name in result.abs_errors:
-            line += f"   (truth {result.ground_truth[name]:.4g}, error {result.abs_errors[name]:.3g})"
-        if name in at_bounds:
-            line += f"   (at its {at_bounds[name]} bound)"
-        err_console.print(line, highlight=False)
+        err_console.print(best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name)), highlight=False)
+    for pair in (result.extra.get("correlations") or [])[:2]:
+        err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
+    if result.extra.get("posterior_note"):
+        err_console.print(result.extra["posterior_note"], highlight=False)
     for name, value in result.extra.get("fixed", {}).items():
         err_console.print(f"  {name} = {value:.4g}   (fixed)", highlight=False)
     if at_bounds:
@@ -441,6 +454,26 @@ def refine_cmd(
     if hint:
         err_console.print(hint, highlight=False)
     err_console.print(f"results in {result.run_dir}")
+
+
+def best_fit_line(name: str, value: float, result: Any, marginal: dict | None, bound: str | None) -> str:
+    """One printed parameter: the best fit and, with a posterior, its 90 % interval and label.
+
+    A parameter the video does not determine gets no error against the truth: its best fit
+    is wherever the search stopped, not a measurement.
+    """
+    line = f"  {name} = {value:.4g}"
+    if marginal is not None:
+        lo, hi = marginal["ci90"]
+        line += f"   [90 %: {lo:.4g} – {hi:.4g}]   {marginal['label']}"
+    truth, errors = result.ground_truth or {}, result.abs_errors or {}
+    if name in errors and (marginal is None or marginal["label"] != "not identified"):
+        line += f"   (truth {truth[name]:.4g}, error {errors[name]:.3g})"
+    elif name in truth:
+        line += f"   (truth {truth[name]:.4g})"
+    if bound:
+        line += f"   (at its {bound} bound)"
+    return line
 
 
 def noise_ratio_hint(ratio: float | None) -> str | None:

@@ -110,7 +110,7 @@ def infer_cmd(
     truth: Annotated[
         list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval).")
     ] = [],  # noqa: B006
-    samples: Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")] = 10000,
+    samples: Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")] = 5000,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png.")

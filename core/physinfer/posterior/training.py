@@ -23,7 +23,7 @@ from physinfer.posterior.estimator import (
     EstimatorConfig,
     NetworkConfig,
     PosteriorEstimator,
-    uniform_prior,
+    to_unbounded,
 )
 from physinfer.posterior.features import EmbeddedSet
 
@@ -67,11 +67,12 @@ def train_estimator(
         )
     torch.manual_seed(seed)
     np.random.seed(seed)  # noqa: NPY002 - sbi draws its validation split from torch and numpy
-    theta = torch.from_numpy(np.asarray(pairs.theta_unit, dtype=np.float32))
+    theta = torch.from_numpy(to_unbounded(np.asarray(pairs.theta_unit, dtype=np.float64)).astype(np.float32))
     x = torch.from_numpy(np.asarray(pairs.x, dtype=np.float32))
-    prior = uniform_prior(theta.shape[1], device)
+    # No prior: the flow is trained on atanh(θ) (unbounded), and the dataset's θ already
+    # follow the prior, which is all single-round NPE needs.
     inference = NPE(
-        prior=prior, density_estimator=network.builder(), device=device, show_progress_bars=False,
+        prior=None, density_estimator=network.builder(), device=device, show_progress_bars=False,
         tracker=_NoTracker(),
     )  # fmt: skip
     inference.append_simulations(theta, x)
@@ -117,6 +118,7 @@ def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
     its "maximum epochs reached" warning, which every chunk of epochs but the last raises."""
     with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*Maximum number of epochs.*")
+        warnings.filterwarnings("ignore", message=".*prior.*")
         return train(**kwargs)
 
 

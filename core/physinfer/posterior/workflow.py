@@ -279,7 +279,7 @@ class PosteriorReport:
 
 
 def posterior_of_clip(
-    estimator: PosteriorEstimator, embedder: Any, clip: Any, *, n_samples: int = 10000, seed: int = 0
+    estimator: PosteriorEstimator, embedder: Any, clip: Any, *, n_samples: int = 5000, seed: int = 0
 ) -> PosteriorReport:
     """Sample the posterior of one clip and summarise it."""
     t0 = time.perf_counter()
@@ -308,7 +308,7 @@ def infer(
     posterior: Path | None = None,
     fps: float | None = None,
     truth: Sequence[str] = (),
-    n_samples: int = 10000,
+    n_samples: int = 5000,
     seed: int = 0,
     device: str | None = None,
 ) -> PosteriorReport:
@@ -486,9 +486,56 @@ def _recording(
 
 
 def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
-    """Printed lines: identified parameters first, then weakly, then the rest."""
+    """Printed lines: one per identified or weakly identified parameter, then one line
+    naming every parameter the video does not determine (their numbers are in the JSON)."""
     from physinfer.posterior.summary import format_marginal
 
-    order = {"identified": 0, "weakly identified": 1, "not identified": 2}
-    ranked = sorted(marginals_.items(), key=lambda kv: order[kv[1]["label"]])
-    return [format_marginal(name, m) for name, m in ranked]
+    shown = [format_marginal(name, m) for name, m in marginals_.items() if m["label"] == "identified"]
+    shown += [format_marginal(name, m) for name, m in marginals_.items() if m["label"] == "weakly identified"]
+    rest = [name for name, m in marginals_.items() if m["label"] == "not identified"]
+    if rest:
+        shown.append(f"  not identified (the video barely narrows their ranges): {', '.join(rest)}")
+    return shown
+
+
+# ------------------------------------------------------------------- for a refinement
+
+
+def posterior_for_refinement(
+    registry: Registry,
+    *,
+    plugin: str,
+    parameter_space: Any,
+    clip: Any,
+    posterior: Path | None,
+    device: str | None = None,
+    seed: int = 0,
+    n_samples: int = 5000,
+) -> tuple[PosteriorReport | None, str | None]:
+    """The amortized posterior of a refinement's target, or why there is none.
+
+    With ``posterior`` given, any mismatch (another plugin, parameter space, embedder, a
+    target shorter than its clips) is the user's error. Without it, the phenomenon's shipped
+    estimator is used when it applies; when it does not (effects switched in, parameters
+    held by ``--fix``, a short target) the refinement goes on without it and the reason is
+    returned instead.
+
+    Returns:
+        ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
+        phenomenon ships no estimator).
+    """
+    phenomenon = registry.phenomenon(plugin)
+    if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
+        return None, None
+    try:
+        estimator, path = load_estimator(registry, plugin, posterior, device)
+        estimator.check_for(plugin, parameter_space, path)
+        pipeline = estimator_embedder(registry, estimator, device)
+        report = posterior_of_clip(estimator, pipeline.embedder, clip, n_samples=n_samples, seed=seed)
+        pipeline.renderer.close()
+    except UserInputError as exc:
+        if posterior is not None:
+            raise
+        return None, f"the plugin's posterior estimator does not apply to this refinement: {exc}"
+    report.estimator = path
+    return report, None

@@ -3,7 +3,9 @@
 The default target is simulated and rendered deterministically from a ground truth away
 from the centre of the space. The flag refines with the SDN and the weights shipped in
 ``physinfer_flag/data/sdn_default.safetensors`` (``make pretrained`` reproduces them);
-``--embedder spectral`` is the parameter-free fallback.
+``--embedder spectral`` is the parameter-free fallback. Its posterior estimator
+(``physinfer_flag/data/posterior_default.safetensors``, 2.4-s clips embedded by that SDN;
+``make posterior`` reproduces it) gives ``infer`` and ``refine`` their intervals.
 """
 
 from __future__ import annotations
@@ -11,8 +13,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from functools import cache
+from pathlib import Path
 
 from physinfer import Effect, Phenomenon, Target
+
+#: The shipped posterior estimator (``make posterior``).
+DEFAULT_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_default.safetensors"
 
 #: Ground truth of the embedded target: wind and area weight off-centre, bending at 1×.
 DEFAULT_TRUTH_BASE = {"wind_speed": 6.5, "area_weight": 0.12}
@@ -73,4 +79,5 @@ def make_phenomenon() -> Phenomenon:
         default_embedder="sdn",
         default_target=default_target,
         default_steps=40,
+        default_posterior=str(DEFAULT_POSTERIOR),
     )
