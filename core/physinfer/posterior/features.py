@@ -135,7 +135,7 @@ def _read_cached(path: Path, total: int) -> np.ndarray:
 
 
 def _embed_range(dataset: ClipDataset, embedder: Embedder, start: int, stop: int) -> np.ndarray:
-    clips = [_as_clip(dataset[i], dataset.fps) for i in range(start, stop)]
+    clips = [as_clip(dataset[i], dataset.fps) for i in range(start, stop)]
     x = np.asarray(embedder.embed_many(clips), dtype=np.float32)
     bad = ~np.isfinite(x).all(axis=1)
     if bad.any():
@@ -147,7 +147,7 @@ def _embed_range(dataset: ClipDataset, embedder: Embedder, start: int, stop: int
     return x
 
 
-def _as_clip(frames: np.ndarray, fps: float) -> Clip:
+def as_clip(frames: np.ndarray, fps: float) -> Clip:
     """A stored ``(T, H, W)`` or ``(T, H, W, 3)`` uint8 clip as a :class:`Clip`."""
     frames = np.asarray(frames)
     if frames.ndim == 3:
