@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.io import atomic_save_npz, atomic_write_json
+from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.posterior.estimator import (
     NetworkConfig,
     PosteriorEstimator,
@@ -162,6 +162,7 @@ def _estimator_path(out: Path) -> Path:
         raise UserInputError(f"--out {out}: name the estimator file *.safetensors")
     if out.is_dir():
         raise UserInputError(f"--out {out} is a directory; give a file name ending in .safetensors")
+    check_output_dir(out.parent)  # before the slow embedding
     return out
 
 
@@ -324,8 +325,7 @@ def infer(
     if n_samples < 100:
         raise UserInputError(f"--samples {n_samples}: at least 100 samples are needed for intervals")
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise UserInputError(f"--out {out} is a file; give a directory for the posterior's files")
+    check_output_dir(out)
     t_start = time.perf_counter()
     estimator, path = load_estimator(registry, plugin, posterior, device)
     pipeline = estimator_embedder(registry, estimator, device)
@@ -409,8 +409,7 @@ def evaluate_calibration(
     if n_samples < 50:
         raise UserInputError(f"--samples {n_samples}: at least 50 posterior samples per simulation are needed")
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise UserInputError(f"--out {out} is a file; give a directory for the calibration's files")
+    check_output_dir(out)
     t0 = time.perf_counter()
     estimator, path = load_estimator(registry, plugin, posterior, device)
     dataset = ClipDataset(data, split)

@@ -32,11 +32,20 @@ def test_flag_refine_writes_outputs_and_resumes(tmp_path):
     for name in ("refinement.png", "side_by_side.mp4", "best_trajectory.npz", "target.mp4", "noise_prior.json"):
         assert (out / name).stat().st_size > 0, name
     trials = RunDirectory(out).read_trials()
-    assert trials[0].x == [0.0] * 17, "the first trial is the centre"
+    # the shipped posterior estimator: its intervals reported, the search started at its median
+    assert data["posterior_source"]["kind"] == "amortized"
+    assert data["posterior"]["wind_speed"]["label"] == "identified"
+    assert data["posterior"]["bend_0deg_c00"]["label"] == "not identified"
+    medians = {name: m["median"] for name, m in data["posterior"].items()}
+    assert trials[0].params == pytest.approx(medians, rel=1e-6), "the first trial is the posterior median"
 
     resumed = cli("refine", "--plugin", "flag", "--steps", "3", "--out", str(out), "--resume", *FAST)
     assert resumed["n_trials"] == 3
     assert [t.x for t in RunDirectory(out).read_trials()[:2]] == [t.x for t in trials]
+
+    plain = cli("refine", "--plugin", "flag", "--steps", "1", "--no-posterior", "--out", str(tmp_path / "plain"), *FAST)
+    assert "posterior" not in plain
+    assert RunDirectory(tmp_path / "plain").read_trials()[0].x == [0.0] * 17, "without it, the centre"
 
 
 def test_colour_640x360_30fps_target_with_truth(tmp_path):
