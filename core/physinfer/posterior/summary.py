@@ -35,16 +35,13 @@ def identifiability_label(contraction: float) -> str:
     return "not identified"
 
 
-def marginals(
-    samples_unit: np.ndarray, space: ParameterSpace, weights: np.ndarray | None = None
-) -> dict[str, dict[str, Any]]:
+def marginals(samples_unit: np.ndarray, space: ParameterSpace) -> dict[str, dict[str, Any]]:
     """Per parameter: median, 50 % and 90 % central intervals (physical units), contraction
     and label.
 
     Args:
         samples_unit: ``(S, D)`` posterior samples in normalised coordinates.
         space: The parameter space (column order).
-        weights: Optional ``(S,)`` non-negative sample weights (importance weights).
 
     Returns:
         ``{name: {"median", "ci50", "ci90", "contraction", "label", "unit"}}``.
@@ -52,9 +49,9 @@ def marginals(
     out: dict[str, dict[str, Any]] = {}
     for i, spec in enumerate(space):
         u = samples_unit[:, i]
-        q = weighted_quantiles(u, [0.5, 0.25, 0.75, 0.05, 0.95], weights)
+        q = np.quantile(u, [0.5, 0.25, 0.75, 0.05, 0.95])
         phys = [float(v) for v in spec.from_unit(np.clip(q, -1.0, 1.0))]
-        variance = weighted_variance(u, weights)
+        variance = float(np.var(u))
         contraction = float(1.0 - variance / PRIOR_VARIANCE)
         out[spec.name] = {
             "median": phys[0],
@@ -68,7 +65,7 @@ def marginals(
 
 
 def correlations(
-    samples_unit: np.ndarray, names: Sequence[str], *, top: int = 5, weights: np.ndarray | None = None
+    samples_unit: np.ndarray, names: Sequence[str], *, top: int = 5
 ) -> list[dict[str, Any]]:
     """The strongest pairwise posterior correlations (|r| ≥ :data:`MIN_CORRELATION`).
 
@@ -81,12 +78,7 @@ def correlations(
     d = samples_unit.shape[1]
     if d < 2:
         return []
-    w = np.ones(len(samples_unit)) if weights is None else np.asarray(weights, dtype=np.float64)
-    w = w / w.sum()
-    centred = samples_unit - w @ samples_unit
-    cov = (centred * w[:, None]).T @ centred
-    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    r = cov / np.outer(sd, sd)
+    r = np.corrcoef(samples_unit, rowvar=False)
     pairs = [
         {"a": names[i], "b": names[j], "r": float(r[i, j])}
         for i in range(d)
@@ -94,25 +86,6 @@ def correlations(
         if abs(r[i, j]) >= MIN_CORRELATION
     ]
     return sorted(pairs, key=lambda p: -abs(p["r"]))[:top]
-
-
-def weighted_quantiles(values: np.ndarray, qs: Sequence[float], weights: np.ndarray | None = None) -> np.ndarray:
-    """Quantiles of ``values`` (``(S,)``), optionally weighted."""
-    if weights is None:
-        return np.quantile(values, qs)
-    order = np.argsort(values)
-    v, w = values[order], np.asarray(weights, dtype=np.float64)[order]
-    cdf = (np.cumsum(w) - 0.5 * w) / w.sum()
-    return np.interp(qs, cdf, v)
-
-
-def weighted_variance(values: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """Variance of ``values``, optionally weighted."""
-    if weights is None:
-        return float(np.var(values))
-    w = np.asarray(weights, dtype=np.float64) / np.sum(weights)
-    mean = float(w @ values)
-    return float(w @ (values - mean) ** 2)
 
 
 def format_marginal(name: str, m: dict[str, Any]) -> str:
