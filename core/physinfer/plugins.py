@@ -1,12 +1,16 @@
 """Plugin discovery: a pluggy manager fed from the ``physinfer`` entry-point group.
 
-Built-in and third-party plugins are found the same way. A plugin that fails to import
-or whose hook raises is recorded with its name and error; the others still load.
+Built-in and third-party plugins are found the same way. A plugin that fails to import,
+implements a hook physinfer does not have (a misspelled name) or whose hook raises is
+recorded with its name and error and left out; the others still load.
+:func:`check_references` imports every ``"module:attr"`` the plugins registered, so
+``physinfer plugins`` shows a lazily named implementation that fails to import.
 ``PHYSINFER_DISABLED_PLUGINS`` (comma-separated entry-point names) blocks plugins.
 """
 
 from __future__ import annotations
 
+import difflib
 import os
 import traceback
 from dataclasses import dataclass, field
@@ -17,7 +21,7 @@ from typing import Any
 import pluggy
 
 from physinfer import hooks
-from physinfer.registry import Registry
+from physinfer.registry import KINDS, Registry
 
 ENTRY_POINT_GROUP = "physinfer"
 DISABLED_ENV = "PHYSINFER_DISABLED_PLUGINS"
@@ -41,6 +45,8 @@ class PluginInfo:
         module: Imported module name (``value`` of the entry point).
         error: ``"ExcType: message"`` if it failed to load or register, else ``None``.
         traceback: Full traceback text of that failure, for ``--verbose`` listings.
+        unresolved: ``"kind name"`` -> ``"ExcType: message"`` for each registered
+            implementation that fails to import (filled by :func:`check_references`).
     """
 
     name: str
@@ -49,6 +55,7 @@ class PluginInfo:
     module: str = ""
     error: str | None = None
     traceback: str | None = field(default=None, repr=False)
+    unresolved: dict[str, str] = field(default_factory=dict)
 
 
 def disabled_plugins() -> set[str]:
@@ -94,10 +101,63 @@ def get_plugin_manager(
     for name, plugin in (extra_plugins or {}).items():
         if name in blocked:
             continue
-        infos[name] = PluginInfo(name=name, module=getattr(plugin, "__name__", repr(plugin)))
-        pm.register(plugin, name=name)
+        info = infos[name] = PluginInfo(name=name, module=getattr(plugin, "__name__", repr(plugin)))
+        try:
+            pm.register(plugin, name=name)
+        except Exception as exc:  # a hook whose arguments do not match its specification
+            info.error = f"{type(exc).__name__}: {exc}"
+            info.traceback = traceback.format_exc()
+    _drop_unknown_hooks(pm, infos)
     pm.check_pending()
     return pm, infos
+
+
+def _drop_unknown_hooks(pm: pluggy.PluginManager, infos: dict[str, PluginInfo]) -> None:
+    """Unregister, with their error, plugins implementing a hook physinfer has no spec for.
+
+    pluggy's ``check_pending`` would raise for the first such hook and take every command
+    down with it; a misspelled hook is the plugin's fault and stays the plugin's problem.
+    """
+    known = [
+        name
+        for name in vars(pm.hook)
+        if not name.startswith("_") and getattr(pm.hook, name).has_spec()
+    ]
+    for name in sorted(vars(pm.hook)):
+        caller = getattr(pm.hook, name)
+        if name.startswith("_") or caller.has_spec():
+            continue
+        for impl in caller.get_hookimpls():
+            if impl.optionalhook or pm.get_plugin(impl.plugin_name) is None:
+                continue
+            close = difflib.get_close_matches(name, known, n=1)
+            hint = (
+                f" (did you mean {close[0]!r}?)"
+                if close
+                else f" (known hooks: {', '.join(sorted(known))})"
+            )
+            info = infos.setdefault(impl.plugin_name, PluginInfo(name=impl.plugin_name))
+            info.error = f"PluginValidationError: unknown hook {name!r}{hint}"
+            pm.unregister(name=impl.plugin_name)
+
+
+def check_references(registry: Registry, infos: dict[str, PluginInfo]) -> None:
+    """Import every registered ``"module:attr"`` and record those that fail in ``infos``.
+
+    Registration names implementations lazily, so a plugin whose module has a broken import
+    registers fine and fails only when used; this finds it beforehand (``physinfer
+    plugins``). It imports every plugin's implementation modules, heavy libraries included.
+    """
+    for kind in KINDS:
+        for entry in registry.entries[kind].values():
+            try:
+                entry.load()
+            except Exception as exc:
+                info = infos.setdefault(entry.plugin, PluginInfo(name=entry.plugin))
+                cause = exc.__cause__ or exc
+                info.unresolved[f"{entry.kind_label} {entry.name}"] = (
+                    f"{type(cause).__name__}: {cause}"
+                )
 
 
 def load_registry(
@@ -113,7 +173,9 @@ def load_registry(
     failing is kept out of the way of nothing else.
     """
     if pm is None:
-        pm, infos = get_plugin_manager(extra_plugins=extra_plugins, load_entry_points=load_entry_points)
+        pm, infos = get_plugin_manager(
+            extra_plugins=extra_plugins, load_entry_points=load_entry_points
+        )
     infos = infos if infos is not None else {}
     registry = Registry()
     for hook_name in REGISTER_HOOKS:

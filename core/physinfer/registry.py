@@ -12,9 +12,25 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from physinfer.errors import UserInputError
+from physinfer.errors import PhysinferError, UserInputError
 
 KINDS = ("phenomena", "optimizers", "embedders", "effects", "commands")
+#: How one entry of each kind is named in messages.
+KIND_LABELS = {
+    "phenomena": "phenomenon",
+    "optimizers": "optimizer",
+    "embedders": "embedder",
+    "effects": "effect",
+    "commands": "command",
+}
+
+
+class PluginLoadError(PhysinferError):
+    """A plugin's registered implementation cannot be imported (the plugin is broken).
+
+    Not the user's input but their environment: the CLI says it in one line naming the
+    plugin, like a user error, and every other plugin keeps working.
+    """
 
 
 def resolve(ref: str | Callable[..., Any]) -> Any:
@@ -40,6 +56,7 @@ class Entry:
         description: One line for listings.
         plugin: Name of the plugin that registered it.
         extra: Kind-specific metadata (``phenomenon`` for effects).
+        kind: One of :data:`KINDS`.
     """
 
     name: str
@@ -47,10 +64,29 @@ class Entry:
     description: str = ""
     plugin: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    kind: str = ""
+
+    @property
+    def kind_label(self) -> str:
+        """``"phenomenon"``, ``"effect"``, ... for messages."""
+        return KIND_LABELS.get(self.kind, "entry")
 
     def load(self) -> Any:
-        """Resolve the factory reference."""
-        return resolve(self.factory)
+        """Resolve the factory reference.
+
+        Raises:
+            PluginLoadError: the reference cannot be imported; one line naming the plugin,
+                what it registered and why (the original exception is its ``__cause__``).
+        """
+        try:
+            return resolve(self.factory)
+        except Exception as exc:
+            text = " ".join(str(exc).split())
+            raise PluginLoadError(
+                f"plugin {self.plugin!r} is broken: its {self.kind_label} {self.name!r} ({self.factory}) "
+                f"fails to import ({type(exc).__name__}: {text}); fix or reinstall the plugin, or block it "
+                f"with PHYSINFER_DISABLED_PLUGINS={self.plugin} (`physinfer plugins` lists what is broken)"
+            ) from exc
 
 
 class Registry:
@@ -74,17 +110,25 @@ class Registry:
                 f"{kind[:-1] if kind != 'phenomena' else 'phenomenon'} {name!r} registered twice "
                 f"(by {existing.plugin!r} and {self._plugin!r})"
             )
-        self.entries[kind][name] = Entry(name, factory, description, self._plugin, dict(extra))
+        self.entries[kind][name] = Entry(
+            name, factory, description, self._plugin, dict(extra), kind
+        )
 
-    def add_phenomenon(self, name: str, factory: str | Callable[[], Any], description: str = "") -> None:
+    def add_phenomenon(
+        self, name: str, factory: str | Callable[[], Any], description: str = ""
+    ) -> None:
         """Register a phenomenon; ``factory()`` returns a :class:`~physinfer.roles.Phenomenon`."""
         self._add("phenomena", name, factory, description)
 
-    def add_optimizer(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+    def add_optimizer(
+        self, name: str, factory: str | Callable[..., Any], description: str = ""
+    ) -> None:
         """Register an optimizer; ``factory(dim=, seed=, names=)`` returns an Optimizer."""
         self._add("optimizers", name, factory, description)
 
-    def add_embedder(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+    def add_embedder(
+        self, name: str, factory: str | Callable[..., Any], description: str = ""
+    ) -> None:
         """Register an embedder; ``factory(model=None, device=None)`` returns an Embedder."""
         self._add("embedders", name, factory, description)
 
@@ -94,7 +138,9 @@ class Registry:
         """Register an effect of ``phenomenon``; ``factory()`` returns an Effect."""
         self._add("effects", name, factory, description, phenomenon=phenomenon)
 
-    def add_command(self, name: str, factory: str | Callable[..., Any], description: str = "") -> None:
+    def add_command(
+        self, name: str, factory: str | Callable[..., Any], description: str = ""
+    ) -> None:
         """Register a CLI command (a ``typer.Typer`` group or a function)."""
         self._add("commands", name, factory, description)
 
@@ -137,12 +183,15 @@ class Registry:
 
     def effects_of(self, phenomenon: str) -> list[str]:
         """Names of the effects registered for ``phenomenon``."""
-        return sorted(n for n, e in self.entries["effects"].items() if e.extra.get("phenomenon") == phenomenon)
+        return sorted(
+            n for n, e in self.entries["effects"].items() if e.extra.get("phenomenon") == phenomenon
+        )
 
     def by_plugin(self, plugin: str) -> dict[str, list[str]]:
         """What ``plugin`` registered, by kind."""
         return {
-            kind: sorted(n for n, e in self.entries[kind].items() if e.plugin == plugin) for kind in KINDS
+            kind: sorted(n for n, e in self.entries[kind].items() if e.plugin == plugin)
+            for kind in KINDS
         }
 
 

@@ -23,6 +23,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from typer.exceptions import TyperException
 
 from physinfer.errors import PhysinferError, UserInputError
@@ -198,8 +199,14 @@ def plugins_cmd(
     as_json: JsonOpt = False,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Show tracebacks of broken plugins.")] = False,
 ) -> None:
-    """List installed plugins and what each provides; broken plugins with their error."""
+    """List installed plugins and what each provides; broken plugins with their error.
+
+    Imports every implementation the plugins name, so one that fails to import shows here.
+    """
+    from physinfer.plugins import check_references
+
     registry, infos = registry_and_infos()
+    check_references(registry, infos)
     rows = []
     for name, info in sorted(infos.items()):
         provided = registry.by_plugin(name)
@@ -215,6 +222,7 @@ def plugins_cmd(
                 "effects": provided["effects"],
                 "commands": provided["commands"],
                 "error": info.error,
+                "unresolved": info.unresolved,
             }
         )
     if as_json:
@@ -233,13 +241,23 @@ def plugins_cmd(
             ", ".join(r["optimizers"]),
             ", ".join(r["embedders"]),
             ", ".join(r["effects"]),
-            "[red]" + r["error"] + "[/]" if r["error"] else "ok",
+            _plugin_status(r["error"], r["unresolved"]),
         )
     Console().print(table)
+    for r in rows:  # in full: the table's cells may be cut to the terminal's width
+        if r["error"] or r["unresolved"]:
+            status = _plugin_status(r["error"], r["unresolved"])
+            err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
     if verbose:
         for name, info in infos.items():
             if info.traceback:
                 err_console.print(f"[bold]{name}[/]\n{info.traceback}", highlight=False)
+
+
+def _plugin_status(error: str | None, unresolved: dict[str, str]) -> str:
+    """The status cell of ``physinfer plugins``: ``ok``, or what failed, in red."""
+    problems = ([error] if error else []) + [f"{what}: {why}" for what, why in unresolved.items()]
+    return "[red]" + escape("; ".join(problems)) + "[/]" if problems else "ok"
 
 
 # -------------------------------------------------------------------------- simulate
@@ -506,9 +524,8 @@ def _mount_plugin_commands() -> None:
     for name, entry in sorted(registry.entries["commands"].items()):
         try:
             obj = entry.load()
-        except Exception as exc:  # report, don't break the CLI
-            infos[entry.plugin].error = f"command {name!r}: {type(exc).__name__}: {exc}"
-            continue
+        except Exception as exc:  # the command says why when run; --help and the rest work
+            obj = _broken_command(exc)
         parent_name, _, child = name.partition(" ")
         parent = app
         if child:
@@ -519,7 +536,21 @@ def _mount_plugin_commands() -> None:
             if parent is app:
                 groups[name] = obj
         else:  # the CLI's one error path, whether or not the plugin decorated its command
-            parent.command(name, help=entry.description or None)(handle_errors()(obj))
+            settings = getattr(obj, "context_settings", None)  # a broken command takes any option
+            command = parent.command(name, help=entry.description or None, context_settings=settings)
+            command(handle_errors()(obj))
+
+
+def _broken_command(error: Exception) -> Callable[..., None]:
+    """A stand-in for a plugin command that fails to import: running it prints ``error``."""
+
+    def broken(as_json: JsonOpt = False) -> None:
+        raise error
+
+    broken.__doc__ = "[unavailable: its plugin is broken; see `physinfer plugins`]"
+    settings = {"ignore_unknown_options": True, "allow_extra_args": True}
+    broken.context_settings = settings  # type: ignore[attr-defined]
+    return broken
 
 
 def _new_group(name: str, groups: dict[str, typer.Typer]) -> typer.Typer:
