@@ -38,6 +38,11 @@ def physinfer_register_commands(registry: Registry) -> None:
         "Find where a refined model disagrees with the video and name the missing effect.",
     )
     registry.add_command(
+        "render",
+        "physinfer.cli.render_cmd:render_cmd",
+        "Render a trajectory file (physinfer NPZ or per-frame OBJ meshes) with a phenomenon's renderer.",
+    )
+    registry.add_command(
         "posterior",
         "physinfer.cli.posterior_cmd:posterior_app",
         "Amortized posteriors over θ: train an estimator on a dataset (sbi).",
