@@ -4,3 +4,52 @@ import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+import json  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@dataclass
+class Ran:
+    """What a CLI command run in-process returned."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+    def json(self) -> dict:
+        """The one JSON object a ``--json`` command printed."""
+        lines = [ln for ln in self.stdout.splitlines() if ln.strip()]
+        assert len(lines) == 1, (
+            f"exit {self.returncode}; stdout {self.stdout!r}; stderr {self.stderr[-2000:]}"
+        )
+        return json.loads(lines[0])
+
+
+def _run_in_process(*args: str, cwd: Path | None = None) -> Ran:
+    from typer.testing import CliRunner
+
+    from physinfer.cli.app import mounted_app
+
+    here = Path.cwd()
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        result = CliRunner().invoke(mounted_app(), [str(a) for a in args])
+    finally:
+        os.chdir(here)
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    return Ran(result.exit_code, result.stdout, result.stderr)
+
+
+@pytest.fixture(scope="session")
+def physinfer_cli():
+    """``physinfer ARGS...`` run in this process (no interpreter start-up, numba and torch already
+    loaded): ``physinfer_cli("refine", "--plugin", "pendulum", ..., cwd=None) -> Ran``. The
+    console script's own start-up is tested with subprocesses in tests/core/test_cli.py."""
+    return _run_in_process

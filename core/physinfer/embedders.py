@@ -11,7 +11,7 @@ growing motion is told apart. numpy only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -93,12 +93,20 @@ class GridSpectrumEmbedder(Embedder):
         config: Settings; defaults suit clips of 4 s at 25 fps.
         model: Ignored (accepted for the uniform embedder factory signature).
         device: Ignored (numpy on CPU).
+        n_frames: Frames read, overriding ``config.n_frames`` (``--embedder-frames``).
     """
 
     def __init__(
-        self, *, config: GridSpectrumConfig | None = None, model: str | None = None, device: str | None = None
+        self,
+        *,
+        config: GridSpectrumConfig | None = None,
+        model: str | None = None,
+        device: str | None = None,
+        n_frames: int | None = None,
     ) -> None:
         self.config = config or GridSpectrumConfig()
+        if n_frames is not None:
+            self.config = replace(self.config, n_frames=int(n_frames))
         self.config.validate()
         self.fps, self.n_frames = self.config.fps, self.config.n_frames
         self._edges = np.geomspace(self.config.f_min, self.config.f_max, self.config.n_bands + 1)

@@ -684,3 +684,6 @@ def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_
         for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
     }
     atomic_write_json(run_dir.path / "result.json", result.summary())
+    from physinfer.report import write_report_quietly  # report.html; a failure only warns
+
+    write_report_quietly(run_dir.path)

@@ -49,6 +49,7 @@ RUN_OUTPUTS = (
     "refinement.png",
     "side_by_side.mp4",
     "best_trajectory.npz",
+    "report.html",
 )
 
 

@@ -5,8 +5,6 @@ on a small generated pendulum dataset (sbi's NPE, the real embedder, no mocks)."
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +14,6 @@ from physinfer import ParameterSpace, ParameterSpec
 from physinfer.errors import UserInputError
 from physinfer.posterior.calibration import calibrate, coverage_from_ranks
 from physinfer.posterior.summary import correlations, identifiability_label, marginals
-
-BIN = Path(sys.executable).parent / "physinfer"
 
 # ------------------------------------------------- calibration on a linear-Gaussian toy
 
@@ -93,7 +89,9 @@ def test_marginals_label_by_contraction_and_report_intervals_in_physical_units()
     assert m["bend"]["label"] == "not identified"
     assert m["wind"]["median"] == pytest.approx(6.0, abs=0.02)  # unit 0.2 → 6 m/s
     lo, hi = m["wind"]["ci90"]
-    assert lo == pytest.approx(6.0 - 1.645 * 0.25, abs=0.03) and hi == pytest.approx(6.0 + 1.645 * 0.25, abs=0.03)
+    assert lo == pytest.approx(6.0 - 1.645 * 0.25, abs=0.03) and hi == pytest.approx(
+        6.0 + 1.645 * 0.25, abs=0.03
+    )
     assert m["wind"]["ci50"][0] > lo and m["wind"]["ci50"][1] < hi
     assert abs(m["bend"]["contraction"]) < 0.03
     assert m["wind"]["unit"] == "m/s"
@@ -126,10 +124,14 @@ def toy_estimator():
     from physinfer.posterior.features import EmbeddedSet
     from physinfer.posterior.training import train_estimator
 
-    space = ParameterSpace([ParameterSpec("a", (0.0, 1.0)), ParameterSpec("b", (1.0, 100.0), scaling="log")])
+    space = ParameterSpace(
+        [ParameterSpec("a", (0.0, 1.0)), ParameterSpec("b", (1.0, 100.0), scaling="log")]
+    )
     rng = np.random.default_rng(0)
     theta = rng.uniform(-1, 1, size=(400, 2)).astype(np.float32)
-    x = np.concatenate([theta + 0.1 * rng.normal(size=theta.shape), rng.normal(size=(400, 1))], axis=1)
+    x = np.concatenate(
+        [theta + 0.1 * rng.normal(size=theta.shape), rng.normal(size=(400, 1))], axis=1
+    )
     pairs = EmbeddedSet(space, theta, x.astype(np.float32), np.arange(400), Path("unused"))
     identity = {
         "plugin": "toy",
@@ -139,7 +141,9 @@ def toy_estimator():
         "probe": [0.0, 1.0, 2.0],
         "clip_seconds": 0.4,
     }
-    network = NetworkConfig(hidden_features=32, num_transforms=3, batch_size=50, learning_rate=2e-3, max_epochs=40)
+    network = NetworkConfig(
+        hidden_features=32, num_transforms=3, batch_size=50, learning_rate=2e-3, max_epochs=40
+    )
     return train_estimator(pairs, identity, network=network, seed=0, device="cpu")
 
 
@@ -150,7 +154,9 @@ def test_an_estimator_round_trips_through_its_file_and_samples_alike(toy_estimat
     loaded = PosteriorEstimator.load(path)
     assert loaded.config == toy_estimator.config
     x = np.array([0.5, -0.5, 0.0], dtype=np.float32)
-    np.testing.assert_allclose(loaded.sample_unit(x, 200, seed=3), toy_estimator.sample_unit(x, 200, seed=3), atol=1e-6)
+    np.testing.assert_allclose(
+        loaded.sample_unit(x, 200, seed=3), toy_estimator.sample_unit(x, 200, seed=3), atol=1e-6
+    )
     samples = loaded.sample_unit(x, 4000, seed=0)
     assert np.median(samples[:, 0]) == pytest.approx(0.5, abs=0.15)  # it learnt something
     assert np.all(np.abs(samples) <= 1.0)  # inside the prior's box
@@ -203,64 +209,67 @@ def test_nan_or_wrong_sized_embeddings_are_refused(toy_estimator):
 # ------------------------------------------------------------- the pendulum, end to end
 
 
-def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=600, cwd=cwd)
-
-
-def json_of(proc: subprocess.CompletedProcess) -> dict:
-    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
-    assert len(lines) == 1, f"exit {proc.returncode}; stdout {proc.stdout!r}; stderr {proc.stderr[-2000:]}"
-    return json.loads(lines[0])
-
-
 @pytest.fixture(scope="module")
-def pendulum_set(tmp_path_factory) -> Path:
-    """A small generated pendulum dataset: 4-s clips, 48 px, 90 training and 30 test simulations."""
+def pendulum_set(tmp_path_factory, physinfer_cli) -> Path:
+    """A small generated pendulum dataset: 2-s clips, 48 px, 60 training and 20 test simulations."""
     root = tmp_path_factory.mktemp("posterior") / "pendulum-set"
-    proc = run_cli(
-        "dataset", "generate", "--plugin", "pendulum", "--sims", "90,0,30", "--renders-per-sim", "1",
-        "--frames", "100", "--size", "48", "--workers", "0", "--seed", "5", "--out", str(root), "--json",
+    proc = physinfer_cli(
+        "dataset", "generate", "--plugin", "pendulum", "--sims", "60,0,20", "--renders-per-sim", "1",
+        "--frames", "50", "--size", "48", "--workers", "0", "--seed", "5", "--out", str(root), "--json",
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     return root
 
 
 @pytest.fixture(scope="module")
-def pendulum_estimator(pendulum_set) -> tuple[Path, dict]:
+def pendulum_estimator(pendulum_set, physinfer_cli) -> tuple[Path, dict]:
     out = pendulum_set.parent / "pendulum.safetensors"
-    proc = run_cli(
+    proc = physinfer_cli(
         "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set), "--out", str(out),
-        "--max-epochs", "40", "--device", "cpu", "--json",
+        "--embedder-frames", "50", "--max-epochs", "40", "--device", "cpu", "--json",
     )  # fmt: skip
-    return out, json_of(proc)
+    return out, proc.json()
 
 
-def test_train_writes_an_estimator_and_caches_the_embeddings(pendulum_set, pendulum_estimator):
+def test_train_writes_an_estimator_and_caches_the_embeddings(
+    pendulum_set, pendulum_estimator, physinfer_cli
+):
     out, summary = pendulum_estimator
     assert out.is_file() and summary["estimator"] == str(out)
     assert summary["plugin"] == "pendulum" and summary["embedder"] == "grid_spectrum"
     assert summary["parameters"] == ["length", "damping", "amplitude"]
-    assert summary["training"]["pairs"] == 90 and 1 <= summary["training"]["epochs"] <= 41
+    assert summary["training"]["pairs"] == 60 and 1 <= summary["training"]["epochs"] <= 41
     cache = Path(summary["embeddings_cache"])
     assert cache.parent == pendulum_set / "embeddings" and cache.is_file()
     with np.load(cache, allow_pickle=False) as data:
-        assert data["x"].shape[0] == 90
+        assert data["x"].shape[0] == 60
     # a second training reuses the cached embeddings (the same file, not rewritten)
     stamp = cache.stat().st_mtime_ns
-    again = json_of(
-        run_cli(
-            "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set),
-            "--out", str(out.with_name("again.safetensors")), "--max-epochs", "5", "--json",
-        )  # fmt: skip
-    )
+    again = physinfer_cli(
+        "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set),
+        "--out", str(out.with_name("again.safetensors")), "--embedder-frames", "50", "--max-epochs", "5", "--json",
+    ).json()  # fmt: skip
     assert again["embeddings_cache"] == str(cache) and cache.stat().st_mtime_ns == stamp
 
 
-def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(pendulum_estimator, tmp_path):
+def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(
+    pendulum_estimator, tmp_path, physinfer_cli
+):
     path, _ = pendulum_estimator
     out = tmp_path / "infer"
-    proc = run_cli("infer", "--plugin", "pendulum", "--posterior", str(path), "--samples", "2000", "--out", str(out), "--json")
-    report = json_of(proc)
+    proc = physinfer_cli(
+        "infer",
+        "--plugin",
+        "pendulum",
+        "--posterior",
+        str(path),
+        "--samples",
+        "2000",
+        "--out",
+        str(out),
+        "--json",
+    )
+    report = proc.json()
     assert set(report["posterior"]) == {"length", "damping", "amplitude"}
     for m in report["posterior"].values():
         assert set(m) == {"median", "ci50", "ci90", "contraction", "label", "unit"}
@@ -270,23 +279,39 @@ def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(pen
     assert set(report["truth_in_ci90"]) == {"length", "damping", "amplitude"}
     assert isinstance(report["correlations"], list)
     with np.load(out / "samples.npz", allow_pickle=False) as data:
-        assert data["samples"].shape == (2000, 3) and list(data["names"]) == ["length", "damping", "amplitude"]
+        assert data["samples"].shape == (2000, 3) and list(data["names"]) == [
+            "length",
+            "damping",
+            "amplitude",
+        ]
         assert data["samples"][:, 0].min() >= 0.4 and data["samples"][:, 0].max() <= 1.6
     assert (out / "corner.png").stat().st_size > 1000
     assert json.loads((out / "posterior.json").read_text())["posterior"] == report["posterior"]
-    human = run_cli("infer", "--plugin", "pendulum", "--posterior", str(path), "--samples", "500", "--out", str(out))
+    human = physinfer_cli(
+        "infer",
+        "--plugin",
+        "pendulum",
+        "--posterior",
+        str(path),
+        "--samples",
+        "500",
+        "--out",
+        str(out),
+    )
     assert human.returncode == 0 and "length" in human.stderr and "identified" in human.stderr
 
 
-def test_evaluate_calibration_reports_coverage_per_parameter(pendulum_set, pendulum_estimator, tmp_path):
+def test_evaluate_calibration_reports_coverage_per_parameter(
+    pendulum_set, pendulum_estimator, tmp_path, physinfer_cli
+):
     path, _ = pendulum_estimator
     out = tmp_path / "cal"
-    proc = run_cli(
+    proc = physinfer_cli(
         "evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(pendulum_set),
         "--samples", "200", "--out", str(out), "--json",
     )  # fmt: skip
-    report = json_of(proc)
-    assert report["n_pairs"] == 30 and report["split"] == "test"
+    report = proc.json()
+    assert report["n_pairs"] == 20 and report["split"] == "test"
     for row in report["parameters"].values():
         assert 0.0 <= row["coverage50"] <= row["coverage90"] <= 1.0
         assert row["verdict90"] in ("calibrated", "over-confident", "under-confident")
@@ -294,16 +319,18 @@ def test_evaluate_calibration_reports_coverage_per_parameter(pendulum_set, pendu
     assert (out / "calibration.png").stat().st_size > 1000 and (out / "calibration.json").is_file()
 
 
-def test_bad_input_to_the_posterior_commands_is_one_clear_error(pendulum_set, pendulum_estimator, tmp_path):
+def test_bad_input_to_the_posterior_commands_is_one_clear_error(
+    pendulum_set, pendulum_estimator, tmp_path, physinfer_cli
+):
     path, _ = pendulum_estimator
     short = tmp_path / "short.mp4"
-    assert run_cli("simulate", "--plugin", "pendulum", "--out", str(short)).returncode == 0
+    assert physinfer_cli("simulate", "--plugin", "pendulum", "--out", str(short)).returncode == 0
     from physinfer.video import read_video, write_video
 
     clip = read_video(short)
-    write_video(short, clip.frames[:40], fps=clip.fps)  # 1.6 s of a 4-s estimator
+    write_video(short, clip.frames[:30], fps=clip.fps)  # 1.2 s of a 2-s estimator
     cases = {
-        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--target", str(short)): "lasts 1.60 s",
+        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--target", str(short)): "lasts 1.20 s",
         ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum, not flag",
         ("infer", "--plugin", "pendulum", "--posterior", str(path), "--device", "tpu9"): "not a torch device",
         ("infer", "--plugin", "pendulum"): "ships no posterior estimator",
@@ -312,19 +339,21 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(pendulum_set, pe
         ("evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(tmp_path)): "not a dataset",
     }  # fmt: skip
     for args, message in cases.items():
-        proc = run_cli(*args, "--json", cwd=tmp_path)
+        proc = physinfer_cli(*args, "--json", cwd=tmp_path)
         assert proc.returncode == 2, (args, proc.stderr[-1500:])
-        assert message in json_of(proc)["error"], (args, proc.stdout)
+        assert message in proc.json()["error"], (args, proc.stdout)
 
 
-def test_refine_reports_the_targets_posterior_and_starts_at_its_median(pendulum_estimator, tmp_path):
+def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
+    pendulum_estimator, tmp_path, physinfer_cli
+):
     path, _ = pendulum_estimator
     out = tmp_path / "run"
-    proc = run_cli(
+    proc = physinfer_cli(
         "refine", "--plugin", "pendulum", "--posterior", str(path), "--steps", "4", "--noise-samples", "0",
         "--floor-samples", "0", "--out", str(out), "--json",
     )  # fmt: skip
-    result = json_of(proc)
+    result = proc.json()
     assert set(result["posterior"]) == {"length", "damping", "amplitude"}
     assert result["posterior_source"] == {"kind": "amortized", "estimator": str(path)}
     assert isinstance(result["correlations"], list)
@@ -334,9 +363,9 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(pendulum_
     for name, m in result["posterior"].items():
         assert first[name] == pytest.approx(m["median"], rel=1e-6)
     # a model the estimator was not trained for is refused before any simulation
-    drag = run_cli(
+    drag = physinfer_cli(
         "refine", "--plugin", "pendulum", "--posterior", str(path), "--effect", "quadratic_drag", "--steps", "2",
         "--out", str(tmp_path / "drag"), "--json",
     )  # fmt: skip
-    assert drag.returncode == 2 and "drag_quadratic" in json_of(drag)["error"]
+    assert drag.returncode == 2 and "drag_quadratic" in drag.json()["error"]
     assert not (tmp_path / "drag" / "trials.jsonl").exists()

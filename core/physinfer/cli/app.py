@@ -561,6 +561,21 @@ def _new_group(name: str, groups: dict[str, typer.Typer]) -> typer.Typer:
     return group
 
 
+_MOUNTED: list[typer.Typer] = []
+
+
+def mounted_app() -> typer.Typer:
+    """The whole CLI, plugin commands included, mounted once per process.
+
+    For running commands in-process (``typer.testing.CliRunner().invoke(mounted_app(), [...])``)
+    without a new interpreter's start-up.
+    """
+    if app not in _MOUNTED:
+        _mount_plugin_commands()
+        _MOUNTED.append(app)
+    return app
+
+
 def run() -> None:
     """Entry point of the ``physinfer`` console script.
 
@@ -568,8 +583,7 @@ def run() -> None:
     command group of its own) take the same internal-error path.
     """
     try:
-        _mount_plugin_commands()
-        app()
+        mounted_app()()
     except _TYPER_FLOW:
         raise
     except Exception as exc:

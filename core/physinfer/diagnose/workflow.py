@@ -393,6 +393,9 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         report = _diagnose(registry, settings, base, target, effect_objs, log or (lambda _msg: None))
         report["wall_time_s"] = time.perf_counter() - start_time
         atomic_write_json(settings.out / "diagnosis.json", report)
+        from physinfer.report import write_report_quietly  # report.html; a failure only warns
+
+        write_report_quietly(settings.out)
     return report
 
 

@@ -87,7 +87,7 @@ def train_estimator(
     while True:
         best = float(inference._summary["best_validation_loss"][-1])
         if on_epoch is not None:
-            on_epoch(inference.epoch, network.max_epochs, best)
+            on_epoch(min(inference.epoch, network.max_epochs), network.max_epochs, best)
         # sbi keeps the best weights at the end of every call; it has converged once the
         # validation loss has not improved for the patience.
         stalled = inference._epochs_since_last_improvement >= network.stop_after_epochs
@@ -115,9 +115,12 @@ def train_estimator(
 
 def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
     """Call sbi's ``train`` without its prints on stdout (``--json`` owns stdout) and without
-    its "maximum epochs reached" warning, which every chunk of epochs but the last raises."""
+    its "maximum epochs reached" warning, which every chunk of epochs but the last raises, nor its
+    warning on constant embedding dimensions (a spectral embedder's empty bands; sbi's z-scoring
+    maps them to zero, as they should be)."""
     with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*Maximum number of epochs.*")
+        warnings.filterwarnings("ignore", message=".*constant values in dimension.*")
         warnings.filterwarnings("ignore", message=".*prior.*")
         return train(**kwargs)
 

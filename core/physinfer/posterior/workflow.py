@@ -354,6 +354,9 @@ def write_report(report: PosteriorReport, estimator: PosteriorEstimator, out: Pa
     report.paths["corner"] = str(corner_plot(report, space, out / "corner.png", title=title))
     report.paths["posterior"] = str(out / "posterior.json")
     atomic_write_json(out / "posterior.json", report.to_dict())
+    from physinfer.report import write_report_quietly  # report.html; a failure only warns
+
+    write_report_quietly(out)
 
 
 # ------------------------------------------------------------------------- calibrate

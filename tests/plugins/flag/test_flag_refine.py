@@ -1,9 +1,6 @@
 """``physinfer refine --plugin flag`` end to end through the CLI (short budgets)."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,17 +9,22 @@ from physinfer.rundir import RunDirectory
 from physinfer.types import Clip
 from physinfer.video import center_crop_resize, read_video, resample, write_video
 
-BIN = Path(sys.executable).parent / "physinfer"
 FAST = ["--optimizer", "random", "--noise-samples", "2", "--floor-samples", "2", "--json"]
 
 
-def cli(*args):
-    proc = subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(proc.stdout)
+@pytest.fixture
+def cli(physinfer_cli):
+    """Run a command in this process; it must succeed; its JSON."""
+
+    def run(*args):
+        proc = physinfer_cli(*args)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return proc.json()
+
+    return run
 
 
-def test_flag_refine_writes_outputs_and_resumes(tmp_path):
+def test_flag_refine_writes_outputs_and_resumes(tmp_path, cli):
     out = tmp_path / "run"
     data = cli("refine", "--plugin", "flag", "--steps", "2", "--out", str(out), *FAST)
     assert data["n_trials"] == 2 and len(data["best_params"]) == 17
@@ -43,12 +45,13 @@ def test_flag_refine_writes_outputs_and_resumes(tmp_path):
     assert resumed["n_trials"] == 3
     assert [t.x for t in RunDirectory(out).read_trials()[:2]] == [t.x for t in trials]
 
-    plain = cli("refine", "--plugin", "flag", "--steps", "1", "--no-posterior", "--out", str(tmp_path / "plain"), *FAST)
+    plain = cli("refine", "--plugin", "flag", "--steps", "1", "--no-posterior", "--out", str(tmp_path / "plain"),
+                "--optimizer", "random", "--noise-samples", "0", "--floor-samples", "0", "--json")
     assert "posterior" not in plain
     assert RunDirectory(tmp_path / "plain").read_trials()[0].x == [0.0] * 17, "without it, the centre"
 
 
-def test_colour_640x360_30fps_target_with_truth(tmp_path):
+def test_colour_640x360_30fps_target_with_truth(tmp_path, cli):
     """A user's video: colour, 16:9, 30 fps; --truth gives abs_errors for those names only."""
     from physinfer_flag.phenomenon import default_target
 
@@ -82,7 +85,7 @@ def test_a_batch_of_flags_gives_the_distances_of_single_trials(tmp_path):
 
 
 @pytest.mark.slow
-def test_flag_trials_on_worker_processes_match_the_in_process_batch(tmp_path):
+def test_flag_trials_on_worker_processes_match_the_in_process_batch(tmp_path, cli):
     """Numba simulation and EGL rendering in spawned workers give this process's distances."""
     quick = ["--steps", "4", "--batch-size", "2", "--optimizer", "random", "--noise-samples", "0",
              "--floor-samples", "0", "--json"]
@@ -93,7 +96,7 @@ def test_flag_trials_on_worker_processes_match_the_in_process_batch(tmp_path):
     assert [t.distance for t in there] == pytest.approx([t.distance for t in here], rel=1e-9)
 
 
-def test_longer_clips_for_the_spectral_embedder(tmp_path):
+def test_longer_clips_for_the_spectral_embedder(tmp_path, cli, physinfer_cli):
     """``--duration`` records longer clips, ``--embedder-frames`` has the spectral embedder read them all."""
     target = tmp_path / "long.mp4"
     made = cli("simulate", "--plugin", "flag", "--set", "wind_speed=4", "--duration", "4", "--seed", "5",
@@ -106,19 +109,19 @@ def test_longer_clips_for_the_spectral_embedder(tmp_path):
     assert data["n_trials"] == 2 and data["n_failed"] == 0
     run = json.loads((out / "run.json").read_text())
     assert run["duration_s"] == 4 and run["embedder_frames"] == 100
-    other = subprocess.run([str(BIN), *common, "--steps", "3", "--embedder-frames", "60", "--resume"],
-                           capture_output=True, text=True, timeout=300)
-    assert other.returncode != 0 and "embedder_frames=100" in other.stderr
+    other = physinfer_cli(*common, "--steps", "3", "--embedder-frames", "60", "--resume")
+    assert other.returncode != 0 and "embedder-frames: run 100, now 60" in " ".join(other.stderr.split())
 
 
-def test_embedder_frames_need_a_parameter_free_embedder(tmp_path):
-    proc = subprocess.run([str(BIN), "refine", "--plugin", "flag", "--embedder-frames", "100", "--steps", "2",
-                           "--out", str(tmp_path / "r")], capture_output=True, text=True, timeout=300)
+def test_embedder_frames_need_a_parameter_free_embedder(tmp_path, physinfer_cli):
+    proc = physinfer_cli("refine", "--plugin", "flag", "--embedder-frames", "100", "--steps", "2",
+                         "--out", str(tmp_path / "r"))
     assert proc.returncode != 0 and "an SDN's are set by its weights" in " ".join(proc.stderr.split())
     assert not (tmp_path / "r").exists()
 
 
-def test_diagnose_compares_every_model_on_the_longer_clips(tmp_path):
+@pytest.mark.slow
+def test_diagnose_compares_every_model_on_the_longer_clips(tmp_path, cli):
     """``diagnose --duration`` reaches every stage: the augmented model records as long as the baseline.
 
     The spectral embedder reads 80 frames, so a stage simulating the default 2.4 s (60 frames)
