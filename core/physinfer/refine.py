@@ -39,17 +39,18 @@ from physinfer.roles import (
     Target,
     Trial,
 )
-from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
+from physinfer.rundir import (
+    NOISE_PRIOR_FILE,
+    RESUME_KEYS,
+    SELECTION_FILE,
+    RunDirectory,
+    TrialRecord,
+    embedding_fingerprint,
+)
 from physinfer.types import Clip, Trajectory
 
 if TYPE_CHECKING:
     from physinfer.trial_workers import TrialWorkers
-
-#: run.json keys that must match for ``--resume``.
-RESUME_KEYS = (
-    "plugin", "optimizer", "seed", "effects", "parameters", "embedder", "seeds_per_trial", "fixed",
-    "duration_s", "embedder_frames",
-)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -479,6 +480,8 @@ def _run_refinement(
     space = pipeline.simulator.parameter_space
     # Embed first: a target the embedder refuses (too short, unreadable) leaves no run behind.
     target_embedding = pipeline.embedder.embed(target.clip)
+    # Part of the run's identity: it changes with the embedder's weights, shipped ones included.
+    run_info = {**run_info, "embedder_fingerprint": embedding_fingerprint(target_embedding)}
     if resume:
         run_dir.check_compatible(run_info, RESUME_KEYS)
         records = run_dir.read_trials()

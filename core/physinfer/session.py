@@ -114,6 +114,20 @@ def optional_settings(
     return settings
 
 
+def resume_identity(target: Target, weights: Path | None) -> dict[str, Any]:
+    """The ``run.json`` entries that tie a run to its target video and embedder weights.
+
+    With :data:`~physinfer.rundir.IDENTITY`'s other entries they make the run's identity: a
+    ``--resume`` with another video, or other ``--weights``, is refused.
+    """
+    from physinfer.rundir import array_sha256, path_sha256
+
+    return {
+        "target_sha256": array_sha256(target.clip.frames, float(target.clip.fps)),
+        "weights_sha256": path_sha256(weights) if weights is not None and Path(weights).exists() else None,
+    }
+
+
 def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
     """The values ``--fix`` (``fixed``, its items) holds in ``pipeline``; ``{}`` without it.
 
@@ -217,6 +231,10 @@ def refine(
     ``duration_s`` and ``embedder_frames``: see :func:`build_pipeline`.
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
+    if resume and overwrite:
+        raise UserInputError(
+            "--resume continues the run in --out and --overwrite starts it again: give one of them"
+        )
     run_dir = RunDirectory(out)
     run_dir.check_out(overwrite=overwrite, target=target_path)
     model_file = None
@@ -276,19 +294,25 @@ def refine(
         "batch_size": batch_size,  # informative: a resumed run may use another q
     }
     run_info.update(optional_settings(fixed_values, duration_s, embedder_frames))
+    run_info.update(resume_identity(target, weights))
     factory = registry.get("optimizers", optimizer).load()
+    start_x = None
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory
 
         space = pipeline.simulator.parameter_space
         start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
-        factory = warm_start_factory(factory, space.to_unit({name: start[name] for name in space.names}))
+        start_x = space.to_unit({name: start[name] for name in space.names})
+        factory = warm_start_factory(factory, start_x)
     elif amortized is not None:  # spend the budget where the video points
         from physinfer.diagnose.warmstart import warm_start_factory
 
         medians = {name: m["median"] for name, m in amortized.marginals.items()}
-        factory = warm_start_factory(factory, pipeline.simulator.parameter_space.to_unit(medians))
+        start_x = pipeline.simulator.parameter_space.to_unit(medians)
+        factory = warm_start_factory(factory, start_x)
         run_info["start"] = {"posterior_median": str(amortized.estimator)}
+    # Every trial's coordinates depend on the warm start: part of the identity.
+    run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
     from physinfer.trial_workers import PipelineSpec, trial_workers
 
     spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)

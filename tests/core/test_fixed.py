@@ -69,7 +69,7 @@ def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(
     assert "amplitude" not in data["best_params"] and "amplitude" not in data["abs_errors"]
     assert all(len(t.x) == 2 for t in RunDirectory(out).read_trials())
     registry, _ = load_registry()
-    with pytest.raises(UserInputError, match="it was run with fixed=\\{'amplitude': 40.0\\}"):
+    with pytest.raises(UserInputError, match="--fix amplitude: run 40, now 30"):
         refine(registry, plugin="pendulum", steps=4, optimizer="random", fixed=["amplitude=30"], out=out,
                resume=True, progress=False)
 

@@ -83,7 +83,7 @@ def test_resume_refuses_other_plugin_and_corrupt_log(tmp_path):
     registry, _ = load_registry()
     out = tmp_path / "run"
     refine(registry, plugin="pendulum", steps=2, optimizer="random", out=out, progress=False)
-    with pytest.raises(UserInputError, match="was run with optimizer='random', not 'cma'"):
+    with pytest.raises(UserInputError, match="--optimizer: run random, now cma"):
         refine(registry, plugin="pendulum", steps=3, optimizer="cma", out=out, resume=True, progress=False)
     with pytest.raises(UserInputError, match="already holds a run"):
         refine(registry, plugin="pendulum", steps=3, optimizer="random", out=out, progress=False)
@@ -101,7 +101,7 @@ def test_resume_refuses_a_run_of_another_plugin(tmp_path):
     (out / "run.json").write_text(json.dumps({"plugin": "flag", "optimizer": "ax", "seed": 0}))
     (out / "trials.jsonl").write_text("")
     registry, _ = load_registry()
-    with pytest.raises(UserInputError, match="it was run with plugin='flag', not 'pendulum'"):
+    with pytest.raises(UserInputError, match="--plugin: run flag, now pendulum"):
         refine(registry, plugin="pendulum", steps=2, out=out, resume=True, progress=False)
 
 
