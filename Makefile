@@ -8,6 +8,8 @@ BIN := $(VENV)/bin
 TORCH_SPEC ?= torch==2.13.0
 CONSTRAINTS := $(VENV)/constraints.txt
 EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+# Headless Chromium and its WebDriver: the tests open every run's report.html in a real browser.
+BROWSER_PACKAGES := chromium chromium-driver
 PIP := $(BIN)/pip --disable-pip-version-check
 # pip warns once per package about index folders this machine lacks; hide only that line.
 QUIET_PIP := 2> >(grep -v "is ignored: it is neither" >&2)
@@ -29,12 +31,18 @@ $(VENV)/.installed: pyproject.toml examples/pendulum/pyproject.toml | $(BIN)/pyt
 
 install: $(VENV)/.installed
 
-# Headless OpenGL through EGL on Mesa's CPU driver (llvmpipe); installed only when missing.
+# Headless OpenGL through EGL on Mesa's CPU driver (llvmpipe), and headless Chromium; each
+# installed only when missing.
 system-deps:
 	@if ! ldconfig -p | grep -q "libEGL_mesa.so" || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
 		echo "installing $(EGL_PACKAGES) (headless EGL)"; \
 		if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; \
 		else sudo apt-get update -qq && sudo apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; fi; \
+	fi
+	@if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then \
+		echo "installing $(BROWSER_PACKAGES) (report.html browser test)"; \
+		if [ "$$(id -u)" = 0 ]; then apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(BROWSER_PACKAGES) > /dev/null; \
+		else sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(BROWSER_PACKAGES) > /dev/null; fi; \
 	fi
 
 demo: install

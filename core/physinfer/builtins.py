@@ -53,6 +53,11 @@ def physinfer_register_commands(registry: Registry) -> None:
         "The posterior of one video in seconds: medians, credible intervals, identifiability.",
     )
     registry.add_command(
+        "report",
+        "physinfer.cli.report_cmd:report_cmd",
+        "Rebuild a run's self-contained report.html (parameters, plots, video, settings).",
+    )
+    registry.add_command(
         "evaluate calibration",
         "physinfer.cli.posterior_cmd:calibration_cmd",
         "Simulation-based calibration of a posterior estimator on held-out simulations.",
