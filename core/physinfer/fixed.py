@@ -15,7 +15,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from physinfer.errors import UserInputError
-from physinfer.parameters import ParameterSpace, parse_float_assignments
+from physinfer.parameters import ParameterSpace, UnknownParameterError, parse_float_assignments
 from physinfer.roles import Params, Simulator
 from physinfer.types import Trajectory
 
@@ -39,9 +39,10 @@ def resolve_fixed(space: ParameterSpace, assignments: Iterable[str], what: str =
     for pattern, value in parse_float_assignments(assignments, what).items():
         names = fnmatch.filter(space.names, pattern)
         if not names:
-            raise UserInputError(
+            raise UnknownParameterError(
                 f"{what} {pattern}={value:g}: no parameter matches {pattern!r}; known parameters: "
-                f"{', '.join(space.names)}"
+                f"{', '.join(space.names)}",
+                pattern,
             )
         for name in names:
             if name in fixed:  # two items (patterns) would set it; the later would silently win

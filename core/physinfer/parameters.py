@@ -21,6 +21,22 @@ from physinfer.errors import UserInputError
 Scaling = Literal["linear", "log"]
 
 
+class UnknownParameterError(UserInputError):
+    """A parameter name (or ``--fix`` pattern) the space does not have.
+
+    Attributes:
+        name: The name or pattern as the user gave it; a caller that knows the phenomenon's
+            effects can say which one it belongs to (:func:`physinfer.session.naming_effects`).
+    """
+
+    def __init__(self, message: str, name: str) -> None:
+        super().__init__(message)
+        self.name = name
+
+    def __reduce__(self) -> tuple:  # pickled across worker processes
+        return (type(self), (str(self), self.name))
+
+
 @dataclass(frozen=True)
 class ParameterSpec:
     """One continuous physical parameter.
@@ -148,8 +164,8 @@ class ParameterSpace:
         try:
             return self.specs[self._index[name]]
         except KeyError:
-            raise UserInputError(
-                f"unknown parameter {name!r}; known parameters: {', '.join(self.names)}"
+            raise UnknownParameterError(
+                f"unknown parameter {name!r}; known parameters: {', '.join(self.names)}", name
             ) from None
 
     @property

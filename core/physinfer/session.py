@@ -6,13 +6,20 @@ The CLI calls these functions; notebooks and benchmarks can call them too.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import fnmatch
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from physinfer.errors import UserInputError
+from physinfer.errors import PhysinferError, UserInputError
 from physinfer.locking import exclusive_directory
-from physinfer.parameters import ParameterSpace, parse_float_assignments, refuse_repeats
+from physinfer.parameters import (
+    ParameterSpace,
+    UnknownParameterError,
+    parse_float_assignments,
+    refuse_repeats,
+)
 from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.registry import Registry, accepts_keyword
 from physinfer.roles import Target
@@ -60,7 +67,8 @@ def build_pipeline(
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
     simulator = make_simulator(phenomenon, effect_objs, duration_s)
     if fixed:
-        simulator = FixedParameters(simulator, resolve_fixed(simulator.parameter_space, fixed))
+        with naming_effects(registry, phenomenon.name, effects, "--fix"):
+            simulator = FixedParameters(simulator, resolve_fixed(simulator.parameter_space, fixed))
     renderer = phenomenon.make_renderer()
     embedder_obj: Any = None
     if embedder != "":
@@ -75,6 +83,58 @@ def build_pipeline(
             options["n_frames"] = embedder_frames
         embedder_obj = registry.embedder(name, **options)
     return Pipeline(phenomenon, simulator, renderer, embedder_obj, effect_objs)
+
+
+class EffectParameterError(UserInputError):
+    """A parameter of one of the phenomenon's effects, given while that effect is not switched in.
+
+    Attributes:
+        name: The parameter (or pattern) as given.
+        option: The option it was given to (``--set``, ``--fix``, ``--truth``).
+        effect: The effect it belongs to.
+    """
+
+    def __init__(self, name: str, option: str, effect: str) -> None:
+        super().__init__(f"{name} (in {option}) belongs to the effect {effect}: add --effect {effect}")
+        self.name, self.option, self.effect = name, option, effect
+
+    def __reduce__(self) -> tuple:  # pickled across worker processes
+        return (type(self), (self.name, self.option, self.effect))
+
+
+@contextmanager
+def naming_effects(registry: Registry, phenomenon: str, effects: Sequence[str], option: str) -> Iterator[None]:
+    """Turn "unknown parameter" into the effect to switch in, when the name is an effect's.
+
+    The effects' parameter spaces are built only when a name is unknown, so a correct
+    command pays nothing for the hint.
+
+    Raises:
+        EffectParameterError: a parameter of an effect of ``phenomenon`` not in ``effects``.
+    """
+    try:
+        yield
+    except UnknownParameterError as exc:
+        owners = effect_parameters(registry, phenomenon, effects)
+        matches = fnmatch.filter(owners, exc.name)
+        if not matches:
+            raise
+        raise EffectParameterError(exc.name, option, owners[matches[0]]) from None
+
+
+def effect_parameters(registry: Registry, phenomenon: str, effects: Sequence[str] = ()) -> dict[str, str]:
+    """Parameter name → effect, for the effects of ``phenomenon`` that are not in ``effects``."""
+    owners: dict[str, str] = {}
+    for name in registry.effects_of(phenomenon):
+        if name in effects:
+            continue
+        try:
+            space = registry.effect(name, phenomenon=phenomenon).parameter_space
+        except PhysinferError:  # a broken plugin gives no hint; its own error shows elsewhere
+            continue
+        for spec in space:
+            owners.setdefault(spec.name, name)
+    return owners
 
 
 def make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | None = None) -> Any:
@@ -265,7 +325,8 @@ def refine(
         batch_size=batch_size,
     )
     config.validate()
-    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
+    with naming_effects(registry, plugin, effects, "--truth"):
+        target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
     amortized, amortized_note = None, None
     if use_posterior:
         from physinfer.posterior.workflow import posterior_for_refinement

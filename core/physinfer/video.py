@@ -37,6 +37,8 @@ def read_video(path: str | Path, fps: float | None = None, max_frames: int | Non
     Raises:
         UserInputError: missing/unreadable file, no frames, unknown frame rate.
     """
+    if fps is not None and not (math.isfinite(fps) and fps > 0):  # given, so say it is wrong
+        raise UserInputError(f"--fps {fps:g} is not a frame rate; give a positive number of frames per second")
     path = Path(path)
     if not path.exists():
         raise UserInputError(f"video {path} does not exist; check the path")

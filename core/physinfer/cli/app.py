@@ -282,7 +282,7 @@ def simulate_cmd(
 ) -> None:
     """Run one simulation and render it to a video (and/or save the trajectory)."""
     from physinfer.parameters import parse_float_assignments
-    from physinfer.session import build_pipeline
+    from physinfer.session import build_pipeline, naming_effects
 
     if out is None and trajectory_out is None:
         raise UserInputError("nothing to write: give --out VIDEO and/or --trajectory-out FILE.npz")
@@ -293,7 +293,8 @@ def simulate_cmd(
             raise UserInputError(f"{option} {path} is a directory; give a file name")
     registry, _ = registry_and_infos()
     pipeline = build_pipeline(registry, plugin, effects=effect, embedder="", duration_s=duration)
-    params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
+    with naming_effects(registry, plugin, effect, "--set"):  # an effect's parameter: name the effect
+        params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
     # Check ζ before simulating: a typo should not cost a simulation.
     zeta = pipeline.renderer.check_render_params(
         {**pipeline.renderer.default_render_params, **parse_render_set(render_set)}
@@ -576,6 +577,32 @@ def mounted_app() -> typer.Typer:
     return app
 
 
+def refuse_unknown_command(cli: typer.Typer, argv: list[str]) -> None:
+    """An unknown command word: one ``error:`` line (one JSON object with ``--json``), exit 2.
+
+    Typer would print a usage box and no JSON. The line names the closest command and the
+    plugins ``PHYSINFER_DISABLED_PLUGINS`` blocks, whose commands are missing on purpose.
+    """
+    import difflib
+
+    from physinfer.plugins import disabled_plugins
+
+    words = [arg for arg in argv if not arg.startswith("-")]
+    commands = typer.main.get_group(cli).commands
+    if not words or words[0] in commands:
+        return
+    message = f"no such command {words[0]!r}"
+    close = difflib.get_close_matches(words[0], list(commands), n=1)
+    message += f" (did you mean {close[0]!r}?)" if close else ""
+    blocked = sorted(disabled_plugins())
+    if blocked:
+        message += f"; PHYSINFER_DISABLED_PLUGINS={','.join(blocked)} blocks those plugins and their commands"
+    err_console.print(f"[bold red]error:[/] {message}; see `physinfer --help`", highlight=False)
+    if "--json" in argv:
+        emit_json({"error": message})
+    sys.exit(2)
+
+
 def run() -> None:
     """Entry point of the ``physinfer`` console script.
 
@@ -583,6 +610,7 @@ def run() -> None:
     command group of its own) take the same internal-error path.
     """
     try:
+        refuse_unknown_command(mounted_app(), sys.argv[1:])
         mounted_app()()
     except _TYPER_FLOW:
         raise

@@ -223,12 +223,18 @@ def run_stage(
 
 
 def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
-    from physinfer.session import build_pipeline, load_target
+    from physinfer.session import EffectParameterError, build_pipeline, load_target
 
-    pipeline = build_pipeline(
-        registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
-        duration_s=settings.duration_s, embedder_frames=settings.embedder_frames, fixed=settings.fixed,
-    )  # fmt: skip
+    try:
+        pipeline = build_pipeline(
+            registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
+            duration_s=settings.duration_s, embedder_frames=settings.embedder_frames, fixed=settings.fixed,
+        )  # fmt: skip
+    except EffectParameterError as exc:  # diagnose switches effects in itself: no --effect to add
+        raise UserInputError(
+            f"{exc.name} (in --fix) belongs to the effect {exc.effect}, which diagnose tries itself: "
+            "--fix only parameters of the model without effects"
+        ) from None
     target = load_target(
         pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
         fixed=settings.fixed,

@@ -226,7 +226,7 @@ def read_checkpoint(
         return tensors, json.loads(meta["state"]), json.loads(meta["param_groups"])
     except Exception as exc:  # safetensors and json raise many types on damage
         raise UserInputError(
-            f"cannot resume from {path} ({type(exc).__name__}: {exc}); delete it or pass resume=False"
+            f"cannot resume from {path} ({type(exc).__name__}: {exc}); delete it or pass --no-resume"
         ) from None
 
 
@@ -248,21 +248,30 @@ def restore(
     optimizer.load_state_dict({"state": state, "param_groups": param_groups})
 
 
+#: ``TrainConfig`` fields as ``physinfer train`` spells them (the others have no option).
+_OPTION = {"batch_size": "--batch-size", "clips_per_label": "--batch-size", "seed": "--seed", "positives": "--positives"}
+#: What a resumed run's stored entries are set by, in ``physinfer train``'s options.
+_SET_BY = {
+    "model_config": " (--frames, --size)",
+    "train_fingerprint": " (the train split of --data)",
+    "val_fingerprint": " (the val split of --data)",
+}
+
+
 def _check_resumable(stored: Mapping[str, Any], current: Mapping[str, Any], path: Path) -> None:
     for key in ("model_config", "train_fingerprint", "val_fingerprint"):
         if stored.get(key) != current.get(key):
             raise UserInputError(
-                f"{path} belongs to a run with a different {key.replace('_', ' ')}; "
-                "use a new output directory or pass resume=False to start over"
+                f"{path} belongs to a run with a different {key.replace('_', ' ')}{_SET_BY[key]}; "
+                "use another --out, or pass --no-resume to start over"
             )
     old = {k: v for k, v in stored["train_config"].items() if k not in _RESUMABLE_CHANGES}
     new = {k: v for k, v in current["train_config"].items() if k not in _RESUMABLE_CHANGES}
     if old != new:
-        changed = sorted(k for k in new if old.get(k) != new[k])
+        changed = sorted({_OPTION.get(k, k) for k in new if old.get(k) != new[k]})
         raise UserInputError(
-            f"{path} was trained with other settings ({', '.join(changed)}); only "
-            f"{', '.join(_RESUMABLE_CHANGES)} may change on resume. Use a new output directory "
-            "or pass resume=False"
+            f"{path} was trained with other settings ({', '.join(changed)}); only --epochs may "
+            "change on resume. Use another --out, or pass --no-resume to start over"
         )
 
 
