@@ -43,6 +43,11 @@ def physinfer_register_commands(registry: Registry) -> None:
         "Render a trajectory file (physinfer NPZ or per-frame OBJ meshes) with a phenomenon's renderer.",
     )
     registry.add_command(
+        "prepare",
+        "physinfer.cli.prepare_cmd:prepare_cmd",
+        "Find the moving subject in a video, steady the camera, crop to the renderer's framing, resample.",
+    )
+    registry.add_command(
         "posterior",
         "physinfer.cli.posterior_cmd:posterior_app",
         "Amortized posteriors over θ: train an estimator on a dataset (sbi).",

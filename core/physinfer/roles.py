@@ -255,6 +255,10 @@ class Phenomenon:
         default_steps: Refinement budget used when ``--steps`` is not given.
         default_posterior: Path of a shipped posterior estimator (``physinfer posterior
             train``) used by ``infer`` and ``refine`` when none is given; ``None``: none.
+        framing: ``(box) -> square``: maps the box ``(x, y, w, h)`` in pixels of the
+            region that moves in a video to the square ``(x, y, side, side)`` the
+            renderer frames at its default ζ (``physinfer prepare``); ``None``:
+            :func:`physinfer.prepare.default_framing`, the box's centre with a margin.
     """
 
     name: str
@@ -268,3 +272,6 @@ class Phenomenon:
     effects: tuple[str, ...] = ()
     default_steps: int = 40
     default_posterior: str | None = None
+    framing: (
+        Callable[[tuple[float, float, float, float]], tuple[float, float, float, float]] | None
+    ) = None

@@ -66,6 +66,29 @@ def default_target() -> Target:
     )
 
 
+#: The moving region of a flag flying in the renderer's default view spans 0.98 fly lengths
+#: across (the fly end folds back) and, drooping in a light wind, up to 1.02 lengths down;
+#: its top-left corner lies 0.19 lengths right of and below the framed square's (measured on
+#: renders at 1.5-10 m/s and varied cameras; docs/real-videos.md).
+FRAMING_SPAN = (0.98, 1.02)
+FRAMING_OFFSET = 0.19
+#: The renderer's automatic square, in fly lengths (``physinfer_flag.render``'s 2 × 0.68).
+FRAMING_SIDE = 1.36
+
+
+def framing(box: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """The square the flag renderer frames, from the box ``(x, y, w, h)`` the flag moves in.
+
+    The fly length in pixels is the larger of what the box's width (flying) and height
+    (drooping) imply; the square hangs from the box's top-left corner, the hoist, as the
+    renderer's square hangs from the hoist top. Assumes the flag flies to the right.
+    """
+    x, y, w, h = box
+    length = max(w / FRAMING_SPAN[0], h / FRAMING_SPAN[1])
+    side = FRAMING_SIDE * length
+    return (x - FRAMING_OFFSET * length, y - FRAMING_OFFSET * length, side, side)
+
+
 def make_phenomenon() -> Phenomenon:
     """Build the record (imports the implementation modules)."""
     from physinfer_flag.simulator import flag_parameter_space
@@ -80,4 +103,5 @@ def make_phenomenon() -> Phenomenon:
         default_target=default_target,
         default_steps=40,
         default_posterior=str(DEFAULT_POSTERIOR),
+        framing=framing,
     )

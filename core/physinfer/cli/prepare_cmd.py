@@ -1,0 +1,154 @@
+"""``physinfer prepare``: frame a real video as the phenomenon's renderer frames its subject.
+
+Registered as a command by physinfer's built-in plugin; the work is done by
+:func:`physinfer.prepare.prepare_clip`. Writes the prepared clip (``--out``), a JSON
+beside it (``prepared.json``: the box, the framing square, the shake, the frame rates,
+the frames kept) and an overlay PNG (``prepared_overlay.png``) to check the box by eye.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
+from physinfer.errors import UserInputError
+
+
+@handle_errors()
+def prepare_cmd(
+    plugin: PluginOpt,
+    target: Annotated[
+        Path, typer.Option("--target", help="Video to prepare (mp4/mov/..., gif or image folder).")
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="Prepared video (.mp4 or .gif); NAME.json and NAME_overlay.png go beside it.",
+        ),
+    ],
+    roi: Annotated[
+        str | None,
+        typer.Option(
+            "--roi",
+            help="x,y,w,h in the input's pixels: the region the subject moves in, instead of the one "
+            "found (framed by the same rule).",
+        ),
+    ] = None,
+    fps: Annotated[
+        float | None,
+        typer.Option("--fps", help="Frame rate of --target, when the file does not say."),
+    ] = None,
+    embedder: Annotated[
+        str | None,
+        typer.Option(
+            "--embedder",
+            help="Embedder whose frame rate and input size to prepare for (default: the plugin's).",
+        ),
+    ] = None,
+    size: Annotated[
+        int | None,
+        typer.Option(
+            "--size", help="Side of the square output in pixels (default: the embedder's)."
+        ),
+    ] = None,
+    start: Annotated[float, typer.Option("--start", help="Seconds to trim from the start.")] = 0.0,
+    duration: Annotated[
+        float | None,
+        typer.Option("--duration", help="Seconds to keep from --start (default: to the end)."),
+    ] = None,
+    no_stabilise: Annotated[
+        bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
+    ] = False,
+    as_json: JsonOpt = False,
+) -> None:
+    """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
+    from physinfer.cli.app import registry_and_infos
+    from physinfer.io import atomic_write_json
+    from physinfer.prepare import PrepareSettings, default_framing, prepare_clip, save_overlay
+    from physinfer.video import read_video, write_video
+
+    paths = output_paths(out, target)
+    registry, _ = registry_and_infos()
+    phenomenon = registry.phenomenon(plugin)
+    name = embedder or phenomenon.default_embedder
+    embedder_obj = registry.embedder(name, model=None, device="cpu")
+    settings = PrepareSettings(
+        size=int(size if size is not None else getattr(embedder_obj, "size", 224)),
+        fps=float(embedder_obj.fps),
+        roi=parse_roi(roi),
+        start_s=start,
+        duration_s=duration,
+        stabilise=not no_stabilise,
+    )
+    settings.validate()
+    clip = read_video(target, fps=fps)
+    with err_console.status(f"preparing {clip.n_frames} frames of {target.name}"):
+        result = prepare_clip(
+            clip, framing=phenomenon.framing or default_framing, settings=settings
+        )
+    write_video(paths["video"], result.clip)
+    save_overlay(result, paths["overlay"])
+    summary: dict[str, Any] = {
+        "plugin": plugin,
+        "target": str(target),
+        "embedder": name,
+        **result.to_dict(),
+        "video": str(paths["video"]),
+        "overlay": str(paths["overlay"]),
+        "json": str(paths["json"]),
+    }
+    atomic_write_json(paths["json"], summary)
+    if as_json:
+        emit_json(summary)
+        return
+    x, y, w, h = result.box
+    err_console.print(
+        f"{result.roi_source} box x={x:.0f} y={y:.0f} w={w:.0f} h={h:.0f}; shake {result.shake_rms_px:.2f} px rms "
+        f"({'removed, residual ' + format(result.residual_rms_px, '.2f') + ' px' if result.stabilised else 'left'}); "
+        f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {settings.size}×{settings.size}",
+        highlight=False,
+    )
+    for warning in result.warnings:
+        err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
+    err_console.print(
+        f"wrote {paths['video']}, {paths['json']}, {paths['overlay']} (check the box)",
+        highlight=False,
+    )
+
+
+def output_paths(out: Path, target: Path) -> dict[str, Path]:
+    """The video, JSON and overlay paths of ``--out``; refuses a bad or clobbering ``--out``."""
+    if out.suffix.lower() not in (".mp4", ".gif"):
+        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+    paths = {
+        "video": out,
+        "json": out.with_suffix(".json"),
+        "overlay": out.with_name(f"{out.stem}_overlay.png"),
+    }
+    for path in paths.values():
+        if path.is_dir():
+            raise UserInputError(f"--out: {path} is a directory; give a file name")
+        if target.exists() and path.exists() and path.resolve() == target.resolve():
+            raise UserInputError(
+                f"--out: writing {path} would overwrite --target; choose another name"
+            )
+    return paths
+
+
+def parse_roi(text: str | None) -> tuple[float, float, float, float] | None:
+    """``"x,y,w,h"`` → four floats (checked against the frame later)."""
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        raise UserInputError(
+            f"--roi {text!r}: give x,y,w,h as four numbers in the input's pixels, e.g. 100,50,300,300"
+        )
+    return values  # type: ignore[return-value]
