@@ -7,9 +7,20 @@ A resumed run replays its logged trials through ``attach``/``tell`` without aski
 pycma accepts one ``tell`` per ``ask``: a generation told without an ask since the last
 one first draws (and drops) the ask the original run made, so the strategy's random
 stream and state are those of the run that was interrupted.
+
+pycma draws from numpy's global generator and seeds it when a strategy is made, which
+would reset a library user's ``np.random`` state (and let the user's draws shift the
+strategy's). Each optimizer keeps the generator state pycma sees as its own: every call
+into pycma swaps it in and the caller's back out, so ``np.random`` is left as it was and
+the strategy draws exactly the numbers it would alone (the same as before the swap was
+added: recorded CMA results are unchanged).
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import numpy as np
 
@@ -45,13 +56,27 @@ class CMAOptimizer(Optimizer):
         x0 = np.zeros(dim)
         if dim == 1:  # pycma refuses 1-D problems; optimise a padded 2-D one
             x0 = np.zeros(2)
-        self._es = cma.CMAEvolutionStrategy(x0, sigma0, opts)
+        self._rng_state: dict[str, Any] | None = None  # the global state pycma sees
+        with self._own_rng():  # pycma seeds np.random here
+            self._es = cma.CMAEvolutionStrategy(x0, sigma0, opts)
         self._next = 0
         self._queue: list[np.ndarray] = []
         self._points: dict[int, np.ndarray] = {}
         self._done: dict[int, float | None] = {}
         self._worst = 0.0
         self._asked = False  # pycma's ask since its last tell
+
+    @contextmanager
+    def _own_rng(self) -> Iterator[None]:
+        """Give pycma this optimizer's ``np.random`` state; restore the caller's after."""
+        callers = np.random.get_state(legacy=False)
+        if self._rng_state is not None:
+            np.random.set_state(self._rng_state)
+        try:
+            yield
+        finally:
+            self._rng_state = np.random.get_state(legacy=False)
+            np.random.set_state(callers)
 
     def _full(self, x: np.ndarray) -> np.ndarray:
         return x if self.dim > 1 else np.append(x, 0.0)
@@ -66,7 +91,8 @@ class CMAOptimizer(Optimizer):
         trials = []
         for _ in range(n):
             if not self._queue:
-                self._queue = list(self._es.ask())
+                with self._own_rng():
+                    self._queue = list(self._es.ask())
                 self._asked = True
             trials.append(self._new(self._queue.pop(0)))
         return trials
@@ -84,8 +110,9 @@ class CMAOptimizer(Optimizer):
             xs = [self._points.pop(i) for i in ids]
             fs = [self._done.pop(i) for i in ids]
             fs = [2 * self._worst + 1 if f is None else f for f in fs]
-            if not self._asked:  # a replayed generation: the original run asked for it
-                self._es.ask()
-            self._es.tell(xs, fs)
+            with self._own_rng():
+                if not self._asked:  # a replayed generation: the original run asked for it
+                    self._es.ask()
+                self._es.tell(xs, fs)
             self._asked = False
             self._queue = []  # the distribution moved: old proposals are stale
