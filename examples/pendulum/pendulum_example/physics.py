@@ -123,13 +123,17 @@ class PendulumSimulator(Simulator):
 
 
 class QuadraticDrag(Effect):
-    """Air drag quadratic in speed: ``a = -c · L · |φ'| φ'`` (angular form)."""
+    """Air drag quadratic in speed: ``a = -c · L · |φ'| φ'`` (angular form); off at ``c = 0``."""
 
     name = "quadratic_drag"
     description = "air drag growing with the square of the bob's speed"
     phenomenon = "pendulum"
     parameter_space = ParameterSpace(
-        [ParameterSpec("drag_quadratic", (0.0, 2.0), "1/m", description="quadratic drag coefficient c")]
+        [
+            ParameterSpec(
+                "drag_quadratic", (0.0, 2.0), "1/m", description="quadratic drag coefficient c", default=0.0
+            )
+        ]
     )
 
     def term(self, state: tuple[float, float, float], params: Params, t: float) -> float:
