@@ -15,7 +15,7 @@ PIP := $(BIN)/pip --disable-pip-version-check
 QUIET_PIP := 2> >(grep -v "is ignored: it is neither" >&2)
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: install system-deps demo test test-all lint bench pretrained posterior clean
+.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -56,6 +56,18 @@ test-all: install
 
 lint: install
 	$(BIN)/ruff check core plugins tests examples benchmarks
+
+# The API reference (pdoc, Google-style docstrings) of the public API: the top-level names,
+# the roles, parameters, value types, hooks and registry, rendering helpers, settings and
+# the testing kit; the other physinfer modules are left out ('!physinfer\..*'). Open
+# docs/api/index.html. tests/core/test_api_docs.py reads this list.
+API_MODULES := physinfer '!physinfer\..*' physinfer.roles physinfer.parameters physinfer.types \
+	physinfer.errors physinfer.hooks physinfer.registry physinfer.plugins physinfer.rendering \
+	physinfer.settings physinfer.testing physinfer.testing.effects physinfer.testing.sensitivity \
+	physinfer.testing.fixtures
+docs: install
+	rm -rf docs/api
+	$(BIN)/python -m pdoc -d google -o docs/api $(API_MODULES)
 
 # The flag's shipped SDN weights: generate the cpu FlagSim preset (resumes), train (resumes;
 # 15 epochs on 60-frame inputs, well under an hour on 2 cores), export float16 weights.

@@ -183,9 +183,11 @@ class Effect(ABC):
         name: Identifier, e.g. ``"wind_gusts"``.
         description: One physical line, e.g. "turbulent fluctuation of the wind speed".
         phenomenon: Name of the phenomenon whose simulator understands this effect.
-        parameter_space: The effect's extra parameters (names unique across effects);
-            a value at the low bound of the first parameter should mean "effect off"
-            where the physics allows it.
+        parameter_space: The effect's extra parameters, merged by the simulator into its
+            own space (names unique across the phenomenon's parameters and every effect's).
+            Each parameter's declared ``default`` is its "off" value: with every parameter
+            at its default the augmented model reproduces the baseline, bit for bit
+            (checked by :func:`physinfer.testing.check_effect`).
     """
 
     name: str
@@ -195,10 +197,12 @@ class Effect(ABC):
 
     @abstractmethod
     def term(self, state: Any, params: Params, t: float) -> Any:
-        """The extra term the simulator adds at time ``t``.
+        """The extra term the simulator adds at time ``t`` (the simulator calls it, not the host).
 
-        ``state`` and the return value are defined by the phenomenon's simulator (for
-        example positions/velocities in and an acceleration or wind field out).
+        ``state`` and the return value are defined by the phenomenon's simulator (the
+        pendulum passes ``(φ, φ', L)`` and adds the returned angular acceleration; the flag
+        passes a ``WindState`` every 10 ms and keeps the one returned). ``params`` holds
+        every parameter, the base ones and every effect's; ``t`` is in seconds.
         """
 
 
