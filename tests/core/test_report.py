@@ -40,9 +40,9 @@ CHROMIUM_FLAGS = (
 
 @pytest.fixture(scope="module")
 def refine_run(tmp_path_factory, physinfer_cli) -> Path:
-    """A 2-trial pendulum refinement with a 4-sample noise floor (a few seconds)."""
+    """A 2-trial pendulum refinement at 64 px with a 2-sample noise floor (a few seconds)."""
     out = tmp_path_factory.mktemp("report") / "refine"
-    ran = physinfer_cli("refine", *QUICK_REFINE, "--floor-samples", "4", "--out", out, "--json")
+    ran = physinfer_cli("refine", *QUICK_REFINE, "--floor-samples", "2", "--out", out, "--json")
     assert ran.returncode == 0, ran.stderr[-2000:]
     return out
 
@@ -234,7 +234,7 @@ def test_the_page_loads_plays_its_video_and_renders_in_chromium(refine_run, brow
     assert images and all(w and w > 100 for w in images), images
     video = browser.execute_async_script(PLAY_VIDEO)
     assert not video.get("error"), video
-    assert video["readyState"] >= 2 and video["currentTime"] >= 0.4 and video["width"] == 448, video
+    assert video["readyState"] >= 2 and video["currentTime"] >= 0.4 and video["width"] >= 128, video
     assert video["frameStd"] > 5, f"the decoded frame is flat: {video}"
     assert _console_errors(browser) == []
     shot = iio.imread(browser.get_screenshot_as_png())
