@@ -6,6 +6,7 @@ strategy's proposals.
 """
 
 import numpy as np
+import pytest
 
 from physinfer.optimizers.cma import CMAOptimizer
 
@@ -62,3 +63,27 @@ def test_two_strategies_at_once_each_draw_their_own_stream():
     a = [t.x for t in one.ask(3)]
     b = [t.x for t in two.ask(3)]
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+@pytest.mark.parametrize("cut", [1, 2, 3, 6, 7, 9])
+def test_a_run_resumed_in_the_middle_of_a_generation_continues_as_the_uninterrupted_one(cut):
+    """Replaying ``cut`` logged trials (attach + tell), then asking, proposes what the
+    uninterrupted run proposed next (found by killing refine: a run cut after 2 trials
+    repeated its second trial's point)."""
+
+    def run(replayed: list[np.ndarray], total: int = 16) -> list[np.ndarray]:
+        opt = CMAOptimizer(dim=3, seed=4)
+        xs = []
+        for x in replayed or [np.zeros(3)]:  # a refinement's first trial is the centre
+            trial = opt.attach(x)
+            opt.tell(trial.index, float(np.sum((trial.x - 0.3) ** 2)))
+            xs.append(trial.x)
+        while len(xs) < total:
+            (trial,) = opt.ask(1)
+            opt.tell(trial.index, float(np.sum((trial.x - 0.3) ** 2)))
+            xs.append(trial.x)
+        return xs
+
+    straight = run([])
+    resumed = run(straight[:cut])
+    assert all(np.array_equal(a, b) for a, b in zip(straight, resumed, strict=True))

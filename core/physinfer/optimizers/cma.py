@@ -6,7 +6,9 @@ a penalty (the worst value seen, times two, plus one) rather than dropped.
 A resumed run replays its logged trials through ``attach``/``tell`` without asking, but
 pycma accepts one ``tell`` per ``ask``: a generation told without an ask since the last
 one first draws (and drops) the ask the original run made, so the strategy's random
-stream and state are those of the run that was interrupted.
+stream and state are those of the run that was interrupted; a generation cut in the middle
+is asked again and the points already replayed from it are dropped, so the resumed run
+continues with the next point of that generation.
 
 pycma draws from numpy's global generator and seeds it when a strategy is made, which
 would reset a library user's ``np.random`` state (and let the user's draws shift the
@@ -94,8 +96,23 @@ class CMAOptimizer(Optimizer):
                 with self._own_rng():
                     self._queue = list(self._es.ask())
                 self._asked = True
+                self._drop_replayed()
             trials.append(self._new(self._queue.pop(0)))
         return trials
+
+    def _drop_replayed(self) -> None:
+        """Drop from a fresh generation the points this generation's trials already are.
+
+        A run resumed in the middle of a generation has replayed (attached) the points the
+        original run took from this very ask; its next trial is the one after them, not
+        their repetition. In an uninterrupted run no pending point equals a fresh sample.
+        """
+        taken = [x[: self.dim] for x in self._points.values()]
+        self._queue = [
+            q
+            for q in self._queue
+            if not any(np.allclose(q[: self.dim], t, rtol=0.0, atol=1e-12) for t in taken)
+        ]
 
     def attach(self, x: np.ndarray) -> Trial:
         return self._new(self._full(np.asarray(x, dtype=float)))
