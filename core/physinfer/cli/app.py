@@ -225,6 +225,10 @@ def plugins_cmd(
                 "unresolved": info.unresolved,
             }
         )
+    for r in rows:  # in full on stderr (the table's cells may be cut to the terminal's width)
+        if r["error"] or r["unresolved"]:
+            status = _plugin_status(r["error"], r["unresolved"])
+            err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
     if as_json:
         emit_json({"plugins": rows, "phenomena": sorted(registry.entries["phenomena"])})
         return
@@ -244,10 +248,6 @@ def plugins_cmd(
             _plugin_status(r["error"], r["unresolved"]),
         )
     Console().print(table)
-    for r in rows:  # in full: the table's cells may be cut to the terminal's width
-        if r["error"] or r["unresolved"]:
-            status = _plugin_status(r["error"], r["unresolved"])
-            err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
     if verbose:
         for name, info in infos.items():
             if info.traceback:
