@@ -105,9 +105,9 @@ class PrepareSettings:
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad value."""
         if not 8 <= self.size <= 4096:
-            raise UserInputError(f"size={self.size}: give 8 to 4096 pixels")
+            raise UserInputError(f"--size {self.size}: give a side of 8 to 4096 pixels")
         if self.fps is not None and not (math.isfinite(self.fps) and self.fps > 0):
-            raise UserInputError(f"--out-fps {self.fps}: give a positive frame rate")
+            raise UserInputError(f"output frame rate {self.fps}: give a positive number of frames per second")
         if not (math.isfinite(self.start_s) and self.start_s >= 0):
             raise UserInputError(f"--start {self.start_s}: give a time in seconds >= 0")
         if self.duration_s is not None and not (
@@ -613,7 +613,7 @@ def energy_stats(energy: np.ndarray, valid: np.ndarray) -> dict[str, float]:
 #: A region stands out when its peak exceeds the background by this many spreads...
 MIN_SIGNIFICANCE = 12.0
 #: ...and this many times the background level.
-MIN_CONTRAST = 1.6
+MIN_CONTRAST = 3.0
 
 
 def find_moving_box(energy: np.ndarray, valid: np.ndarray) -> tuple[Box, dict[str, float]]:
@@ -634,10 +634,10 @@ def find_moving_box(energy: np.ndarray, valid: np.ndarray) -> tuple[Box, dict[st
     stats = energy_stats(energy, valid)
     if stats["significance"] < MIN_SIGNIFICANCE or stats["contrast"] < MIN_CONTRAST:
         raise UserInputError(
-            "no moving region found: looked for a region whose frame-to-frame change stands out from the "
-            f"rest of the frame, but the strongest is {stats['contrast']:.2f}x the background level "
-            f"(needs {MIN_CONTRAST:g}x and {MIN_SIGNIFICANCE:g} spreads, has {stats['significance']:.1f}); "
-            "give the subject's region with --roi x,y,w,h (input pixels)"
+            "no moving region found: looked for a region whose frame-to-frame change stands out from "
+            f"the rest of the frame, but the strongest is {stats['contrast']:.1f}x the background's level "
+            f"and {stats['significance']:.0f} spreads above it (needs {MIN_CONTRAST:g}x and "
+            f"{MIN_SIGNIFICANCE:g}); give the subject's region with --roi x,y,w,h (input pixels)"
         )
     grown = (energy > stats["low"]) & valid
     labels, count = ndimage.label(grown, structure=np.ones((3, 3)))

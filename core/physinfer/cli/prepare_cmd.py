@@ -8,6 +8,7 @@ the frames kept) and an overlay PNG (``prepared_overlay.png``) to check the box 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -72,17 +73,23 @@ def prepare_cmd(
     from physinfer.video import read_video, write_video
 
     paths = output_paths(out, target)
-    registry, _ = registry_and_infos()
-    phenomenon = registry.phenomenon(plugin)
-    name = embedder or phenomenon.default_embedder
-    embedder_obj = registry.embedder(name, model=None, device="cpu")
+    # Options are checked before the embedder (and torch) loads: a typo should cost nothing.
     settings = PrepareSettings(
-        size=int(size if size is not None else getattr(embedder_obj, "size", 224)),
-        fps=float(embedder_obj.fps),
         roi=parse_roi(roi),
         start_s=start,
         duration_s=duration,
         stabilise=not no_stabilise,
+        size=size or 224,
+    )
+    settings.validate()
+    registry, _ = registry_and_infos()
+    phenomenon = registry.phenomenon(plugin)
+    name = embedder or phenomenon.default_embedder
+    embedder_obj = registry.embedder(name, model=None, device="cpu")
+    settings = replace(
+        settings,
+        size=int(size if size is not None else getattr(embedder_obj, "size", 224)),
+        fps=float(embedder_obj.fps),
     )
     settings.validate()
     clip = read_video(target, fps=fps)
