@@ -107,7 +107,9 @@ class PrepareSettings:
         if not 8 <= self.size <= 4096:
             raise UserInputError(f"--size {self.size}: give a side of 8 to 4096 pixels")
         if self.fps is not None and not (math.isfinite(self.fps) and self.fps > 0):
-            raise UserInputError(f"output frame rate {self.fps}: give a positive number of frames per second")
+            raise UserInputError(
+                f"output frame rate {self.fps}: give a positive number of frames per second"
+            )
         if not (math.isfinite(self.start_s) and self.start_s >= 0):
             raise UserInputError(f"--start {self.start_s}: give a time in seconds >= 0")
         if self.duration_s is not None and not (
