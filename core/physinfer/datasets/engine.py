@@ -37,7 +37,7 @@ from physinfer.datasets.storage import (
     write_manifest,
     write_unit_record,
 )
-from physinfer.datasets.worker import UnitJob, limit_threads, run_unit
+from physinfer.datasets.worker import UnitJob, run_unit, start_worker
 from physinfer.errors import PhysinferError, UserInputError
 from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.locking import LOCK_FILE, exclusive_directory
@@ -120,12 +120,13 @@ def open_executor(
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    # spawn, not fork: EGL contexts and torch's thread pools do not survive a fork.
+    # spawn, not fork: EGL contexts and torch's thread pools do not survive a fork. The
+    # workers die with this process, even when it is killed (start_worker).
     pool = ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
-        initializer=limit_threads,
-        initargs=(threads_per_worker,),
+        initializer=start_worker,
+        initargs=(threads_per_worker, os.getpid()),
     )
     try:
         yield pool, ExecutorInfo("processes", workers, threads_per_worker)

@@ -60,6 +60,34 @@ class UnitJob:
     threads: int | None = 1
 
 
+#: Seconds between a worker's checks that the process that started it is alive.
+PARENT_POLL_S = 0.25
+
+
+def start_worker(threads: int, parent_pid: int) -> None:
+    """Initializer of a local worker process: :func:`die_with_parent`, then :func:`limit_threads`."""
+    die_with_parent(parent_pid)
+    limit_threads(threads)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """End this worker process soon after the process that started it dies (``kill -9`` too).
+
+    A process pool's workers would otherwise outlive a killed parent, each waiting for ever
+    on a job queue whose writing end it holds itself (or finishing its job first). A daemon
+    thread polls the parent's PID: when it is gone (the worker was re-parented) the worker
+    exits at once. ``prctl(PR_SET_PDEATHSIG)`` would be quicker but fires when the *thread*
+    that started the worker ends, which need not be the parent's main thread.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="physinfer-parent-watch", daemon=True).start()
+
+
 def limit_threads(n: int) -> None:
     """Cap the threads of BLAS, OpenMP, torch, numba and llvmpipe in this process (once).
 
