@@ -47,19 +47,29 @@ def texture(height, width, seed):
     return (40 + 180 * image).astype(np.uint8)
 
 
-def composite(flag, path, size, square, seed=0):
-    """The flag clip scaled to ``square = (x, y, side)`` in a ``size = (H, W)`` frame, encoded."""
+def composite(flag, path, size, square, seed=0, shifts=None):
+    """The flag clip scaled to ``square = (x, y, side)`` in a ``size = (H, W)`` frame, encoded.
+
+    ``shifts`` ``(T, 2)``: camera shake, the content moved by ``(dx, dy)`` pixels per frame.
+    """
     height, width = size
     x, y, side = square
-    background = texture(height, width, seed)
+    margin = 8
+    background = texture(height + 2 * margin, width + 2 * margin, seed)
     rng = np.random.default_rng(seed)
+    shifts = np.zeros((flag.n_frames, 2)) if shifts is None else shifts
     frames = np.empty((flag.n_frames, height, width, 3), np.uint8)
     for t, frame in enumerate(flag.frames):
         canvas = background.copy()
-        canvas[y : y + side, x : x + side] = np.asarray(
+        canvas[margin + y : margin + y + side, margin + x : margin + x + side] = np.asarray(
             Image.fromarray(frame).resize((side, side), Image.Resampling.BILINEAR, reducing_gap=2.0)
         )
-        frames[t] = np.clip(canvas + rng.normal(0, 3.0, canvas.shape), 0, 255).astype(np.uint8)
+        left, top = margin - shifts[t][0], margin - shifts[t][1]
+        view = Image.fromarray(canvas).resize(
+            (width, height), Image.Resampling.BILINEAR, box=(left, top, left + width, top + height)
+        )
+        noisy = np.asarray(view, np.float32) + rng.normal(0, 3.0, (height, width, 3))
+        frames[t] = np.clip(noisy, 0, 255).astype(np.uint8)
     write_video(path, Clip(frames, flag.fps))
     return read_video(path)
 
@@ -119,3 +129,22 @@ def test_localisation_across_positions_and_scales(flag_clip, tmp_path):
         scores.append(iou(result.square, (*square[:2], square[2], square[2])))
         print(f"{size[1]}x{size[0]} square {square}: IoU {scores[-1]:.3f}, {seconds[-1]:.2f} s")
     assert min(scores) >= MIN_IOU, scores
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "size,square,amplitude,whole",
+    [((360, 640), (250, 60, 200), 3.0, True), ((360, 640), (250, 60, 200), 2.0, False),
+     ((720, 1280), (700, 150, 300), 4.0, False)],
+)  # fmt: skip
+def test_shake_measured_on_flag_composites(flag_clip, tmp_path, size, square, amplitude, whole):
+    """The shake measurement behind docs/real-videos.md (prints the errors)."""
+    shifts = np.random.default_rng(5).uniform(-amplitude, amplitude, (flag_clip.n_frames, 2))
+    shifts = np.round(shifts) if whole else shifts
+    result = prepare_flag(
+        composite(flag_clip, tmp_path / "shake.mp4", size, square, seed=9, shifts=shifts)
+    )
+    error = np.linalg.norm(result.shifts - (shifts - shifts[len(shifts) // 2]), axis=1)
+    print(f"{size[1]}x{size[0]} ±{amplitude} px: error rms {np.sqrt((error**2).mean()):.3f} max "
+          f"{error.max():.3f} px, residual {result.residual_rms_px:.3f} px rms")  # fmt: skip
+    assert result.stabilised and error.max() <= 1.0 and result.residual_rms_px <= 1.0
