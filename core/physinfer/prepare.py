@@ -250,6 +250,11 @@ def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> Pre
     applied = measured if stabilised else np.zeros_like(measured)
     steady = steadied if steadied is not None else gray
     valid = valid_mask(gray.shape[1:], applied)
+    if valid.mean() < 0.25:  # a pan, not a shake: too little of the frame stays in view
+        raise UserInputError(
+            f"the camera moves by up to {np.abs(applied).max() / scale:.0f} px: too much to steady (a pan?); "
+            "use footage from a camera held still, or --no-stabilise"
+        )
     energy = motion_energy(steady)
     if roi_a is None:
         box_a, stats = find_moving_box(energy, valid)
