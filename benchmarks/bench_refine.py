@@ -32,7 +32,12 @@ Variants (each its own rows in ``results.jsonl``): ``--fix NAME=VALUE`` holds pa
 --embedder-frames N`` so the parameter-free embedder reads N frames instead of 30; as
 ``refine --duration / --embedder-frames``); ``--batch-size Q`` proposes and simulates Q
 trials per optimizer step (``step_s`` then counts each trial's share of its
-batch's time).
+batch's time); ``--posterior shipped|FILE`` refines as ``refine`` does with an estimator
+(first trial at the amortized posterior's median, the search confined to its box;
+``--no-box``: the whole space) and records per target the posterior ``refine`` reports
+(refined from the trials with the box proposal, or the amortized one where the trials give
+none), the amortized one, and the one refined with the product proposal: for each, how many
+90 % wind intervals cover the truth, the posterior median's error and the interval's width.
 """
 
 from __future__ import annotations
@@ -99,8 +104,9 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     factory = registry.get("optimizers", optimizer).load()
     amortized = None
     start = time.perf_counter()
-    if args.posterior:  # as `refine` does with an estimator: report its intervals, start at its median
+    if args.posterior:  # as `refine` does: start at the posterior median, search its box
         from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.posterior.refined import posterior_start
         from physinfer.posterior.workflow import posterior_for_refinement
 
         estimator = None if args.posterior == "shipped" else Path(args.posterior)
@@ -112,12 +118,15 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
             registry, plugin=args.plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
             posterior=estimator, seed=0,
         )
-        medians = {name: m["median"] for name, m in amortized.marginals.items()}
-        factory = warm_start_factory(factory, pipeline.simulator.parameter_space.to_unit(medians))
+        post_start = posterior_start(amortized, pipeline.simulator.parameter_space)
+        factory = warm_start_factory(factory, post_start.start_x, None if args.no_box else post_start.box)
     # The trials do not depend on the selection, so a finished run of the same settings is
     # continued (nothing re-simulated but the selection and the floor) instead of re-run.
     resume = args.reuse_trials and run_dir.run_file.is_file() and len(run_dir.read_trials()) >= args.steps
     result = run_refinement(pipeline, target, factory, run_dir, config, run_info=info, resume=resume)
+    posterior_rows = {}
+    if amortized is not None:
+        posterior_rows = _posterior_rows(result, amortized, pipeline.simulator.parameter_space, post_start, target, out)
     wall = time.perf_counter() - start
     floor = result.extra.get("noise_floor") or {}
     return {
@@ -134,21 +143,42 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         "n_failed": result.n_failed,
         "trials_reused": resume,
         "selection_s": (result.extra.get("selection") or {}).get("selection_s"),
-        **(_posterior_row(amortized, target.truth) if amortized is not None else {}),
+        **posterior_rows,
     }
 
 
-def _posterior_row(report: Any, truth: dict) -> dict:
-    """The amortized posterior's wind and area-weight intervals, whether they cover the truth,
-    and the posterior median's errors."""
-    row: dict[str, Any] = {"posterior": {}}
+def _posterior_rows(result: Any, amortized: Any, space: Any, post_start: Any, target: Target, out: Path) -> dict:
+    """The target's posterior as `refine` reports it (refined from the trials where they give
+    one, with the search box's proposal), the amortized one it started from, and the
+    refined one by the other proposal (the amortized samples reweighted): one row each."""
+    from physinfer.posterior.refined import refine_posterior, report_posterior
+
+    report_posterior(result, amortized, space, post_start, out, seed=0)
+    ok = [t for t in result.trials if t.distance is not None]
+    product, _ = refine_posterior(
+        amortized.samples_unit, amortized.marginals, space, np.array([t.x for t in ok]),
+        np.array([t.distance for t in ok]), (result.extra.get("noise_floor") or {}).get("pairwise") or [],
+        post_start.box, method="product", seed=0,
+    )
+    return {
+        "posterior": _posterior_row(result.extra["posterior"], target.truth),
+        "posterior_kind": result.extra["posterior_source"]["kind"],
+        "posterior_amortized": _posterior_row(amortized.marginals, target.truth),
+        "posterior_product": _posterior_row(product.marginals, target.truth) if product else None,
+    }
+
+
+def _posterior_row(marginals: dict, truth: dict) -> dict:
+    """Wind and area-weight intervals, whether they cover the truth, and the median's errors."""
+    row: dict[str, Any] = {}
     for name in ("wind_speed", "area_weight"):
-        if name in report.marginals:
-            m = report.marginals[name]
-            row["posterior"][name] = {
+        if name in marginals:
+            m = marginals[name]
+            row[name] = {
                 "median": m["median"], "ci90": m["ci90"], "label": m["label"],
                 "covers": bool(m["ci90"][0] <= truth[name] <= m["ci90"][1]),
                 "median_abs_error": abs(m["median"] - truth[name]),
+                "ci90_width": m["ci90"][1] - m["ci90"][0],
             }
     return row
 
@@ -203,13 +233,22 @@ def accuracy(rows: list[dict]) -> dict[str, Any]:
 
 
 def _coverage(rows: list[dict]) -> dict[str, Any]:
-    with_posterior = [r["posterior"]["wind_speed"] for r in rows if "wind_speed" in r.get("posterior", {})]
-    if not with_posterior:
-        return {}
-    return {
-        "wind_ci90_covers": sum(p["covers"] for p in with_posterior),
-        "posterior_median_wind_abs_error": statistics.median(p["median_abs_error"] for p in with_posterior),
-    }
+    """Per posterior variant: targets whose 90 % wind interval covers the truth, the median
+    error of the posterior median, the median interval width."""
+    out: dict[str, Any] = {}
+    for key in ("posterior", "posterior_amortized", "posterior_product"):
+        winds = [r[key]["wind_speed"] for r in rows if (r.get(key) or {}).get("wind_speed")]
+        if winds:
+            out[key] = {
+                "n": len(winds),
+                "wind_ci90_covers": sum(p["covers"] for p in winds),
+                "median_wind_abs_error": statistics.median(p["median_abs_error"] for p in winds),
+                "share_wind_within_0_5": float(np.mean([p["median_abs_error"] <= 0.5 for p in winds])),
+                "median_wind_ci90_width": statistics.median(p.get("ci90_width", float("nan")) for p in winds),
+            }
+    if "posterior" in out:
+        out["refined_targets"] = sum(r.get("posterior_kind") == "refined" for r in rows)
+    return out
 
 
 def main() -> None:
@@ -239,6 +278,8 @@ def main() -> None:
     parser.add_argument("--posterior", default=None, metavar="shipped|FILE",
                         help="refine as `refine --posterior` does: the target's amortized posterior (the plugin's "
                         "shipped estimator, or FILE) gives the start and the intervals recorded per row")
+    parser.add_argument("--no-box", action="store_true",
+                        help="with --posterior: search the whole space (start at the median only)")
     parser.add_argument("--out", default="runs/bench_refine")
     parser.add_argument("--shard", default="0/1", help="K/N: run only targets with index %% N == K, so N "
                         "processes (or machines sharing --out) split the work; the summary covers every row logged")
@@ -267,6 +308,8 @@ def main() -> None:
         del settings["batch_size"]  # and rows from before --batch-size
     if args.posterior is None:
         del settings["posterior"]  # and rows from before --posterior
+    if not args.no_box:
+        del settings["no_box"]
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):

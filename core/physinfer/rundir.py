@@ -62,6 +62,7 @@ RUN_OUTPUTS = (
     "side_by_side.mp4",
     "best_trajectory.npz",
     "report.html",
+    "posterior_samples.npz",
 )
 
 #: ``run.json`` entries a resume must match, with the name a difference is shown under
@@ -81,15 +82,16 @@ IDENTITY = {
     "render_params": "--render-set",
     "target_sha256": "--target",
     "start_x": "search start (--model / --posterior)",
+    "search_box": "search box (--posterior)",
     "embedder_fingerprint": "the embedder's output",
 }
 RESUME_KEYS = tuple(IDENTITY)
 #: Identity entries recorded only since runs have had them: a ``run.json`` without one is
 #: an older run, resumed without that check.
-RECORDED_LATER = ("weights_sha256", "target_sha256", "start_x", "embedder_fingerprint")
+RECORDED_LATER = ("weights_sha256", "target_sha256", "start_x", "embedder_fingerprint", "search_box")
 #: Entries compared with a tolerance (floats from a network or a sampler, which may differ
 #: in their last bits across BLAS builds and thread counts): largest relative difference.
-TOLERANCES = {"embedder_fingerprint": 1e-3, "start_x": 1e-6}
+TOLERANCES = {"embedder_fingerprint": 1e-3, "start_x": 1e-6, "search_box": 1e-6}
 #: Length of :func:`embedding_fingerprint`.
 FINGERPRINT_DIM = 16
 #: Differences listed in a refusal; the rest are counted.
@@ -326,7 +328,7 @@ def _same(key: str, old: Any, new: Any) -> bool:
     a, b = np.asarray(old, dtype=np.float64), np.asarray(new, dtype=np.float64)
     if a.shape != b.shape:
         return False
-    scale = max(float(np.linalg.norm(a)), 1.0 if key == "start_x" else 1e-12)
+    scale = max(float(np.linalg.norm(a)), 1.0 if key in ("start_x", "search_box") else 1e-12)
     return bool(np.linalg.norm(a - b) <= TOLERANCES[key] * scale)
 
 

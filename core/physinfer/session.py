@@ -367,13 +367,16 @@ def refine(
         factory = warm_start_factory(factory, start_x)
     elif amortized is not None:  # spend the budget where the video points
         from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.posterior.refined import posterior_start
 
-        medians = {name: m["median"] for name, m in amortized.marginals.items()}
-        start_x = pipeline.simulator.parameter_space.to_unit(medians)
-        factory = warm_start_factory(factory, start_x)
-        run_info["start"] = {"posterior_median": str(amortized.estimator)}
-    # Every trial's coordinates depend on the warm start: part of the identity.
+        post_start = posterior_start(amortized, pipeline.simulator.parameter_space)
+        start_x = post_start.start_x
+        factory = warm_start_factory(factory, start_x, post_start.box)
+        run_info["start"] = {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical}
+    # Every trial's coordinates depend on the warm start and the search box: part of the identity.
     run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
+    if amortized is not None and model_file is None:
+        run_info["search_box"] = [[float(v) for v in ends] for ends in post_start.box]
     from physinfer.trial_workers import PipelineSpec, trial_workers
 
     spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)
@@ -392,9 +395,9 @@ def refine(
         if executor is not None:
             result.extra["executor"] = executor
         if amortized is not None:
-            result.extra["posterior"] = amortized.marginals
-            result.extra["correlations"] = amortized.correlations
-            result.extra["posterior_source"] = {"kind": "amortized", "estimator": str(amortized.estimator)}
+            from physinfer.posterior.refined import report_posterior
+
+            report_posterior(result, amortized, pipeline.simulator.parameter_space, post_start, run_dir.path, seed=seed)
         elif amortized_note:
             result.extra["posterior_note"] = amortized_note
         write_video(run_dir.path / TARGET_FILE, target.clip)

@@ -355,7 +355,20 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
     )  # fmt: skip
     result = proc.json()
     assert set(result["posterior"]) == {"length", "damping", "amplitude"}
-    assert result["posterior_source"] == {"kind": "amortized", "estimator": str(path)}
+    source = result["posterior_source"]
+    assert source["kind"] == "amortized" and source["estimator"] == str(path)
+    assert "noise floor was not measured" in source["not_refined"]  # --floor-samples 0
+    assert result["posterior_amortized"] == result["posterior"]
+    with np.load(out / "posterior_samples.npz", allow_pickle=False) as data:
+        assert data["amortized"].shape[1] == 3 and "refined" not in data
+    # the search box: the identified parameters' region, every trial inside it
+    box = json.loads((out / "run.json").read_text())["start"]["search_box"]
+    assert box == source["search_box"]
+    identified = {n for n, m in result["posterior"].items() if m["label"] != "not identified"}
+    assert set(box) == identified
+    for line in (out / "trials.jsonl").read_text().splitlines():
+        params = json.loads(line)["params"]
+        assert all(lo - 1e-9 <= params[n] <= hi + 1e-9 for n, (lo, hi) in box.items())
     assert isinstance(result["correlations"], list)
     assert json.loads((out / "result.json").read_text())["posterior"] == result["posterior"]
     # the first trial is the posterior median (the warm start), not the centre of the space
@@ -369,3 +382,66 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
     )  # fmt: skip
     assert drag.returncode == 2 and "drag_quadratic" in drag.json()["error"]
     assert not (tmp_path / "drag" / "trials.jsonl").exists()
+
+
+# ------------------------------------------------- the refined posterior (BOLFI-style)
+
+
+def _one_identified_space_and_amortized(rng):
+    """``a`` identified (amortized samples around 0.2 ± 0.15 in unit coordinates), ``b`` not."""
+    space = ParameterSpace([ParameterSpec("a", (0.0, 10.0)), ParameterSpec("b", (1.0, 2.0))])
+    samples = np.stack([np.clip(0.2 + 0.15 * rng.normal(size=4000), -1, 1), rng.uniform(-1, 1, 4000)], axis=1)
+    return space, samples, marginals(samples, space)
+
+
+def _chaotic_trials(rng, truth: float, n: int, box: tuple[np.ndarray, np.ndarray]):
+    """Trials of a chaotic simulator: d = (x_a - truth)² + floor noise, b leaves no mark."""
+    x = rng.uniform(box[0], box[1], size=(n, 2))
+    noise = lambda size: 0.01 * np.exp(0.3 * rng.normal(size=size))  # noqa: E731
+    return x, (x[:, 0] - truth) ** 2 + noise(n), noise(6)
+
+
+def test_the_search_box_covers_the_identified_parameter_and_all_of_the_others():
+    from physinfer.posterior.refined import informed_dims, search_box
+
+    space, samples, m = _one_identified_space_and_amortized(np.random.default_rng(0))
+    dims = informed_dims(m, space.names)
+    assert dims == [0]
+    lo, hi = search_box(samples, dims)
+    assert -1 < lo[0] < 0.2 - 3 * 0.15 and 0.2 + 3 * 0.15 < hi[0] < 1
+    assert (lo[1], hi[1]) == (-1.0, 1.0)
+
+
+def test_the_refined_posterior_finds_the_distance_minimum_and_covers_it():
+    from physinfer.posterior.refined import refine_posterior, search_box
+
+    rng = np.random.default_rng(1)
+    space, samples, m = _one_identified_space_and_amortized(rng)
+    box = search_box(samples, [0])
+    truth = 0.35  # inside the amortized 90 % interval, off its median
+    x, d, floor = _chaotic_trials(rng, truth, 24, box)
+    for method in ("box", "product"):
+        post, why = refine_posterior(samples, m, space, x, d, floor, box, method=method, seed=0)
+        assert why is None and post is not None, why
+        lo, hi = np.quantile(post.samples_unit[:, 0], [0.05, 0.95])
+        assert lo <= truth <= hi, (method, lo, hi)
+        assert np.median(post.samples_unit[:, 0]) == pytest.approx(truth, abs=0.08)
+        assert post.modelled == ["a"] and post.ess >= 200
+        assert post.marginals["b"]["label"] == "not identified"
+
+
+def test_no_refined_posterior_without_a_noise_scale_or_enough_trials():
+    from physinfer.posterior.refined import refine_posterior, search_box
+
+    rng = np.random.default_rng(2)
+    space, samples, m = _one_identified_space_and_amortized(rng)
+    box = search_box(samples, [0])
+    x, d, floor = _chaotic_trials(rng, 0.3, 24, box)
+    cases = {
+        "deterministic": (x, d, [0.0, 0.0, 0.0]),
+        "not measured": (x, d, []),
+        "at least 6": (x[:3], d[:3], floor),
+    }
+    for words, (xs, ds, fl) in cases.items():
+        post, why = refine_posterior(samples, m, space, xs, ds, fl, box)
+        assert post is None and words in why, (words, why)

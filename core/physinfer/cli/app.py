@@ -461,6 +461,8 @@ def refine_cmd(
         err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
     if result.extra.get("posterior_note"):
         err_console.print(result.extra["posterior_note"], highlight=False)
+    if result.extra.get("posterior_source"):
+        err_console.print(posterior_source_line(result.extra["posterior_source"]), highlight=False)
     for name, value in result.extra.get("fixed", {}).items():
         err_console.print(f"  {name} = {value:.4g}   (fixed)", highlight=False)
     if at_bounds:
@@ -484,7 +486,7 @@ def best_fit_line(name: str, value: float, result: Any, marginal: dict | None, b
     line = f"  {name} = {value:.4g}"
     if marginal is not None:
         lo, hi = marginal["ci90"]
-        line += f"   [90 %: {lo:.4g} – {hi:.4g}]   {marginal['label']}"
+        line += f"   posterior {marginal['median']:.4g} [90 %: {lo:.4g} – {hi:.4g}]   {marginal['label']}"
     truth, errors = result.ground_truth or {}, result.abs_errors or {}
     if name in errors and (marginal is None or marginal["label"] != "not identified"):
         line += f"   (truth {truth[name]:.4g}, error {errors[name]:.3g})"
@@ -493,6 +495,17 @@ def best_fit_line(name: str, value: float, result: Any, marginal: dict | None, b
     if bound:
         line += f"   (at its {bound} bound)"
     return line
+
+
+def posterior_source_line(source: dict) -> str:
+    """Where the printed intervals come from: the refinement's trials or the estimator alone."""
+    estimator = Path(source["estimator"]).name
+    if source["kind"] == "refined":
+        return (
+            f"posterior: refined by this run's trials (a likelihood of the distance over "
+            f"{', '.join(source['modelled'])}; the noise floor sets its scale), from {estimator}"
+        )
+    return f"posterior: {estimator} alone (not refined: {source.get('not_refined', 'no trials used')})"
 
 
 def noise_ratio_hint(ratio: float | None) -> str | None:

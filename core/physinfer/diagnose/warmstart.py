@@ -21,6 +21,13 @@ the inner optimizer's proposals would repeat the bound in that coordinate, and a
 26 of the drag model's 32 trials sat at maximal damping, 24 with the drag exactly off).
 With ``|c| ≤ 0.5`` each half of the inner range still covers at least a quarter of the
 parameter's range.
+
+A search box ``[lo, hi]`` (per coordinate, inside ``[-1, 1]``) narrows the search: the same
+map then sends ``[-1, 1]`` onto ``[lo, hi]`` (``x = c + z (hi - c)`` for ``z ≥ 0``,
+``x = c + z (c - lo)`` for ``z < 0``), with the centre held in the box's middle half. A
+refinement started from an amortized posterior searches the region its samples cover for
+the parameters the video determines (:func:`physinfer.posterior.refined.search_box`) and the
+whole range for the others. Without a box the map is the one above, bit for bit.
 """
 
 from __future__ import annotations
@@ -42,29 +49,39 @@ class WarmStartOptimizer(Optimizer):
     Args:
         inner: The optimizer doing the work.
         start: ``(D,)`` warm-start point in ``[-1, 1]^D``; the first trial.
+        box: ``(lo, hi)``, each ``(D,)`` with ``-1 ≤ lo < hi ≤ 1``: the region searched
+            (default: all of ``[-1, 1]^D``).
     """
 
-    def __init__(self, inner: Optimizer, start: np.ndarray) -> None:
+    def __init__(
+        self, inner: Optimizer, start: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> None:
         super().__init__(dim=inner.dim, seed=inner.seed, names=inner.names)
         start = np.asarray(start, dtype=float).reshape(-1)
         if start.shape != (inner.dim,):
             raise ValueError(f"warm start has {start.size} coordinates, the space {inner.dim}")
+        lo, hi = (-np.ones(inner.dim), np.ones(inner.dim)) if box is None else box
+        self.lo = np.clip(np.asarray(lo, dtype=float).reshape(-1), -1.0, 1.0)
+        self.hi = np.clip(np.asarray(hi, dtype=float).reshape(-1), -1.0, 1.0)
+        if self.lo.shape != (inner.dim,) or self.hi.shape != (inner.dim,) or np.any(self.hi <= self.lo):
+            raise ValueError(f"a search box needs {inner.dim} coordinates with lo < hi")
         self.inner = inner
-        self.start = np.clip(start, -1.0, 1.0)
-        self.centre = np.clip(self.start, -CENTRE_LIMIT, CENTRE_LIMIT)
+        self.start = np.clip(start, self.lo, self.hi)
+        margin = (1.0 - CENTRE_LIMIT) / 2.0 * (self.hi - self.lo)  # 0.5 on [-1, 1]
+        self.centre = np.clip(self.start, self.lo + margin, self.hi - margin)
         self._first = True
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
         """Inner coordinates ``z`` → space coordinates ``x`` (both ``(D,)`` in ``[-1, 1]``)."""
         z = np.clip(np.asarray(z, dtype=float), -1.0, 1.0)
-        c = self.centre
-        return np.clip(np.where(z >= 0, c + z * (1.0 - c), c + z * (1.0 + c)), -1.0, 1.0)
+        c, lo, hi = self.centre, self.lo, self.hi
+        return np.clip(np.where(z >= 0, c + z * (hi - c), c + z * (c - lo)), lo, hi)
 
     def to_z(self, x: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`to_x`."""
-        x = np.clip(np.asarray(x, dtype=float), -1.0, 1.0)
-        c = self.centre
-        return np.clip(np.where(x >= c, (x - c) / (1.0 - c), (x - c) / (1.0 + c)), -1.0, 1.0)
+        """Inverse of :meth:`to_x` (a point outside the box maps to the box's edge)."""
+        c, lo, hi = self.centre, self.lo, self.hi
+        x = np.clip(np.asarray(x, dtype=float), lo, hi)
+        return np.clip(np.where(x >= c, (x - c) / (hi - c), (x - c) / (c - lo)), -1.0, 1.0)
 
     def _outer(self, trial: Trial) -> Trial:
         return Trial(trial.index, self.to_x(trial.x))
@@ -86,10 +103,13 @@ class WarmStartOptimizer(Optimizer):
         self.inner.tell(index, value, sem)
 
 
-def warm_start_factory(factory: Callable[..., Optimizer], start: np.ndarray) -> Callable[..., Optimizer]:
-    """An optimizer factory like ``factory`` whose optimizers start at ``start``."""
+def warm_start_factory(
+    factory: Callable[..., Optimizer], start: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None = None
+) -> Callable[..., Optimizer]:
+    """An optimizer factory like ``factory`` whose optimizers start at ``start`` (and search
+    ``box`` when given)."""
 
     def build(**kwargs: Any) -> Optimizer:
-        return WarmStartOptimizer(factory(**kwargs), start)
+        return WarmStartOptimizer(factory(**kwargs), start, box)
 
     return build

@@ -121,6 +121,7 @@ def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
     with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*Maximum number of epochs.*")
         warnings.filterwarnings("ignore", message=".*constant values in dimension.*")
+        warnings.filterwarnings("ignore", message=".*extreme outliers in dimension.*")
         warnings.filterwarnings("ignore", message=".*prior.*")
         return train(**kwargs)
 
