@@ -73,6 +73,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--estimator", default=None, help="'shipped' or a file: skip training")
     parser.add_argument("--samples", type=int, default=1000)
+    parser.add_argument("--density", default="nsf", help="nsf, maf or mdn (as posterior train --density)")
+    parser.add_argument("--patience", type=int, default=60, help="epochs without improvement before stopping")
     parser.add_argument("--out", default="runs/bench_posterior")
     args = parser.parse_args()
 
@@ -84,7 +86,11 @@ def main() -> None:
     if args.data is None:
         seconds["generate"] = generate(args, data)
     if args.estimator is None:
-        trained = train_posterior(registry, plugin=args.plugin, data=data, out=out / "estimator.safetensors", device="cpu")
+        from physinfer.posterior.estimator import NetworkConfig
+
+        network = NetworkConfig(density=args.density, stop_after_epochs=args.patience)
+        trained = train_posterior(registry, plugin=args.plugin, data=data, out=out / "estimator.safetensors",
+                                  device="cpu", network=network)
         seconds.update(trained.seconds)
         estimator_path: Path | None = trained.path
     else:
@@ -99,6 +105,7 @@ def main() -> None:
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}",
         "data": str(data),
         "estimator": str(path),
+        "network": {"density": args.density, "patience": args.patience} if args.estimator is None else None,
         "calibration": report.to_dict(),
         "infer_s_median": infer_seconds(registry, path, data, args.plugin),
         "seconds": seconds,

@@ -35,8 +35,9 @@ trials per optimizer step (``step_s`` then counts each trial's share of its
 batch's time); ``--posterior shipped|FILE`` refines as ``refine`` does with an estimator
 (first trial at the amortized posterior's median, the search confined to its box;
 ``--no-box``: the whole space) and records per target the posterior ``refine`` reports
-(refined from the trials with the box proposal, or the amortized one where the trials give
-none), the amortized one, and the one refined with the product proposal: for each, how many
+(refined from the trials: the amortized samples reweighted by their likelihood, or the
+amortized one where the trials give none), the amortized one, and the one refined with the
+box proposal (``prior × likelihood`` alone): for each, how many
 90 % wind intervals cover the truth, the posterior median's error and the interval's width.
 """
 
@@ -149,22 +150,23 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
 
 def _posterior_rows(result: Any, amortized: Any, space: Any, post_start: Any, target: Target, out: Path) -> dict:
     """The target's posterior as `refine` reports it (refined from the trials where they give
-    one, with the search box's proposal), the amortized one it started from, and the
-    refined one by the other proposal (the amortized samples reweighted): one row each."""
+    one: the amortized samples reweighted by the trials' likelihood), the amortized one it
+    started from, and the one refined with the other proposal (uniform over the search box):
+    one row each."""
     from physinfer.posterior.refined import refine_posterior, report_posterior
 
     report_posterior(result, amortized, space, post_start, out, seed=0)
     ok = [t for t in result.trials if t.distance is not None]
-    product, _ = refine_posterior(
+    box, _ = refine_posterior(
         amortized.samples_unit, amortized.marginals, space, np.array([t.x for t in ok]),
         np.array([t.distance for t in ok]), (result.extra.get("noise_floor") or {}).get("pairwise") or [],
-        post_start.box, method="product", seed=0,
+        post_start.box, method="box", seed=0,
     )
     return {
         "posterior": _posterior_row(result.extra["posterior"], target.truth),
         "posterior_kind": result.extra["posterior_source"]["kind"],
         "posterior_amortized": _posterior_row(amortized.marginals, target.truth),
-        "posterior_product": _posterior_row(product.marginals, target.truth) if product else None,
+        "posterior_box": _posterior_row(box.marginals, target.truth) if box else None,
     }
 
 
@@ -236,7 +238,7 @@ def _coverage(rows: list[dict]) -> dict[str, Any]:
     """Per posterior variant: targets whose 90 % wind interval covers the truth, the median
     error of the posterior median, the median interval width."""
     out: dict[str, Any] = {}
-    for key in ("posterior", "posterior_amortized", "posterior_product"):
+    for key in ("posterior", "posterior_amortized", "posterior_box"):
         winds = [r[key]["wind_speed"] for r in rows if (r.get(key) or {}).get("wind_speed")]
         if winds:
             out[key] = {
@@ -310,6 +312,8 @@ def main() -> None:
         del settings["posterior"]  # and rows from before --posterior
     if not args.no_box:
         del settings["no_box"]
+    if args.posterior is not None:
+        settings["refined_method"] = "product"  # rows before it was the default reported "box"
     done = logged_rows(log, settings)
     optimizers = [o.strip() for o in args.optimizers.split(",") if o.strip()]
     for index in range(shard, args.targets, n_shards):

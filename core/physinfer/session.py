@@ -233,10 +233,10 @@ def load_target(
         zeta = pipeline.renderer.check_render_params({**target.render_params, **render_set})
         merged_truth = {**(target.truth or {}), **truth_values}
         return Target(target.clip, merged_truth or None, zeta, target.description)
-    from physinfer.video import read_video
+    from physinfer.video import read_target_video
 
     zeta = pipeline.renderer.check_render_params({**pipeline.renderer.default_render_params, **render_set})
-    clip = read_video(target_path, fps=fps)
+    clip = read_target_video(target_path, fps=fps)
     return Target(clip, truth_values or None, zeta, str(target_path))
 
 

@@ -129,7 +129,7 @@ def handle_errors(
             try:
                 return func(*args, **kwargs)
             except (UserInputError, PhysinferError) as exc:
-                err_console.print(f"[bold red]error:[/] {exc}", highlight=False)
+                err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
                 if as_json:
                     emit_json({"error": str(exc)})
                 raise typer.Exit(2) from None
@@ -610,7 +610,7 @@ def refuse_unknown_command(cli: typer.Typer, argv: list[str]) -> None:
     blocked = sorted(disabled_plugins())
     if blocked:
         message += f"; PHYSINFER_DISABLED_PLUGINS={','.join(blocked)} blocks those plugins and their commands"
-    err_console.print(f"[bold red]error:[/] {message}; see `physinfer --help`", highlight=False)
+    err_console.print(f"[bold red]error:[/] {message}; see `physinfer --help`", highlight=False, soft_wrap=True)
     if "--json" in argv:
         emit_json({"error": message})
     sys.exit(2)

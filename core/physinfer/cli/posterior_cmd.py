@@ -71,8 +71,13 @@ def train_cmd(
     ] = None,
     weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
     split: Annotated[str, typer.Option("--split", help="Dataset split to train on.")] = "train",
-    density: Annotated[str, typer.Option("--density", help="Density estimator: maf, nsf or mdn.")] = "maf",
+    density: Annotated[
+        str, typer.Option("--density", help="Density estimator: nsf (neural spline flow), maf or mdn.")
+    ] = "nsf",
     max_epochs: Annotated[int, typer.Option("--max-epochs", help="Upper bound on training epochs.")] = 400,
+    patience: Annotated[
+        int, typer.Option("--patience", help="Stop after this many epochs without a better validation loss.")
+    ] = 60,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")] = 0,
     device: DeviceOpt = None,
     as_json: JsonOpt = False,
@@ -86,7 +91,7 @@ def train_cmd(
         result = train_posterior(
             registry, plugin=plugin, data=data, out=out, embedder=embedder, embedder_frames=embedder_frames,
             weights=weights, device=device, split=split,
-            network=NetworkConfig(density=density, max_epochs=max_epochs), seed=seed, progress=progress,
+            network=NetworkConfig(density=density, max_epochs=max_epochs, stop_after_epochs=patience), seed=seed, progress=progress,
         )  # fmt: skip
     if as_json:
         emit_json(result.to_dict())

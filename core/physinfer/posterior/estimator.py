@@ -53,13 +53,13 @@ class NetworkConfig:
         validation_fraction: Share of the pairs held out for the early stop.
     """
 
-    density: str = "maf"
+    density: str = "nsf"
     hidden_features: int = 64
     num_transforms: int = 5
     batch_size: int = 50
     learning_rate: float = 1e-3
     max_epochs: int = 400
-    stop_after_epochs: int = 20
+    stop_after_epochs: int = 60
     validation_fraction: float = 0.1
 
     def validate(self) -> None:
