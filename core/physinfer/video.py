@@ -8,6 +8,7 @@ can cause comes back as a :class:`~physinfer.errors.UserInputError` that says wh
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,8 +22,23 @@ from physinfer.types import Clip
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
 
+#: A target video's frames are decoded at most this large (longer side, pixels): a 4K video
+#: is downscaled while it is decoded, so its memory stays bounded (the embedders read 64-224 px).
+TARGET_MAX_SIDE = 1920
+#: At most this many bytes of decoded target frames: a longer video is cut, with a warning.
+TARGET_MAX_BYTES = 2 * 2**30
+#: Smallest shorter side of a target (pixels): a 1 x 128 "video" is no picture of anything.
+TARGET_MIN_SIDE = 32
+#: A target whose frame-to-frame change stays below this (gray levels, 99.9th percentile over
+#: pixels and frame pairs) shows nothing moving: codec noise reaches 1-2 levels.
+STATIC_LEVELS = 3.0
 
-def read_video(path: str | Path, fps: float | None = None, max_frames: int | None = None) -> Clip:
+_log = logging.getLogger(__name__)
+
+
+def read_video(
+    path: str | Path, fps: float | None = None, max_frames: int | None = None, *, max_side: int | None = None
+) -> Clip:
     """Read a video file or a folder of images.
 
     Args:
@@ -30,6 +46,8 @@ def read_video(path: str | Path, fps: float | None = None, max_frames: int | Non
         fps: Frame rate to assume; required for image folders and for files whose
             container does not say. Overrides the container's rate when given.
         max_frames: Stop after this many frames (None: all).
+        max_side: Downscale frames whose longer side exceeds this while decoding (None: as
+            stored).
 
     Returns:
         RGB clip, frames ``(T, H, W, 3)`` uint8.
@@ -43,11 +61,11 @@ def read_video(path: str | Path, fps: float | None = None, max_frames: int | Non
     if not path.exists():
         raise UserInputError(f"video {path} does not exist; check the path")
     if path.is_dir():
-        frames, found_fps = _read_image_folder(path, max_frames), None
+        frames, found_fps = _read_image_folder(path, max_frames, max_side), None
     elif path.suffix.lower() == ".gif":
-        frames, found_fps = _read_gif(path, max_frames)
+        frames, found_fps = _read_gif(path, max_frames, max_side)
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        frames, found_fps = _read_pyav(path, max_frames)
+        frames, found_fps = _read_pyav(path, max_frames, max_side)
     else:
         raise UserInputError(
             f"{path}: unsupported video format {path.suffix!r}; use one of "
@@ -59,6 +77,54 @@ def read_video(path: str | Path, fps: float | None = None, max_frames: int | Non
     if rate is None or not math.isfinite(rate) or rate <= 0:
         raise UserInputError(f"{path}: cannot tell the frame rate; pass it with --fps")
     return Clip(_to_rgb(np.stack(frames)), float(rate))
+
+
+def read_target_video(
+    path: str | Path,
+    fps: float | None = None,
+    *,
+    max_side: int = TARGET_MAX_SIDE,
+    max_bytes: int = TARGET_MAX_BYTES,
+) -> Clip:
+    """A user's target video, in bounded memory and checked to show something moving.
+
+    Frames are downscaled to ``max_side`` while decoding and reading stops after
+    ``max_bytes`` of frames (a warning says how much was kept).
+
+    Raises:
+        UserInputError: as :func:`read_video`; a frame smaller than ``TARGET_MIN_SIDE`` on a
+            side; a video in which nothing moves.
+    """
+    probe = read_video(path, fps, max_frames=1, max_side=max_side)
+    height, width = probe.frames.shape[1:3]
+    if min(height, width) < TARGET_MIN_SIDE:
+        raise UserInputError(
+            f"{path}: its frames are {width}×{height} pixels; a target needs at least {TARGET_MIN_SIDE} on "
+            "each side to show the phenomenon"
+        )
+    budget = max(2, max_bytes // (height * width * 3))
+    clip = read_video(path, fps, max_frames=budget, max_side=max_side)
+    if len(clip.frames) >= budget:
+        _log.warning(
+            "warning: %s is longer than %d frames at %d×%d; only its first %.1f s are used",
+            path, budget, width, height, budget / clip.fps,
+        )  # fmt: skip
+    check_motion(clip, path)
+    return clip
+
+
+def check_motion(clip: Clip, path: str | Path) -> None:
+    """Refuse a clip in which nothing changes beyond codec noise between frames."""
+    if len(clip.frames) < 2:
+        raise UserInputError(f"{path}: one frame is a picture, not a video; a target needs motion")
+    pairs = np.linspace(0, len(clip.frames) - 2, min(len(clip.frames) - 1, 50)).astype(int)
+    gray = lambda i: clip.frames[i, ::2, ::2].astype(np.float32).mean(axis=-1)  # noqa: E731
+    change = max(float(np.quantile(np.abs(gray(i + 1) - gray(i)), 0.999)) for i in pairs)
+    if change < STATIC_LEVELS:
+        raise UserInputError(
+            f"{path}: nothing moves in this video (frame-to-frame change at most {change:.1f} gray levels); "
+            "a target must show the phenomenon in motion"
+        )
 
 
 def _to_rgb(frames: np.ndarray) -> np.ndarray:
@@ -73,7 +139,16 @@ def _to_rgb(frames: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(frames)
 
 
-def _read_pyav(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], float | None]:
+def scaled_size(width: int, height: int, max_side: int | None) -> tuple[int, int]:
+    """``(width, height)`` shrunk (aspect kept, even numbers) so the longer side is at most
+    ``max_side``; unchanged when it already is."""
+    if max_side is None or max(width, height) <= max_side:
+        return width, height
+    scale = max_side / max(width, height)
+    return max(2, int(round(width * scale / 2)) * 2), max(2, int(round(height * scale / 2)) * 2)
+
+
+def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
     import av
 
     try:
@@ -84,7 +159,8 @@ def _read_pyav(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], fl
             rate = stream.average_rate or stream.guessed_rate or stream.base_rate
             frames = []
             for frame in container.decode(stream):
-                frames.append(frame.to_ndarray(format="rgb24"))
+                width, height = scaled_size(frame.width, frame.height, max_side)
+                frames.append(frame.to_ndarray(width=width, height=height, format="rgb24"))
                 if max_frames is not None and len(frames) >= max_frames:
                     break
     except UserInputError:
@@ -94,14 +170,23 @@ def _read_pyav(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], fl
     return frames, float(rate) if rate else None
 
 
-def _read_gif(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], float | None]:
+def _pil_rgb(image: object, max_side: int | None) -> np.ndarray:
+    """A Pillow image as RGB, downscaled to ``max_side``."""
+    from PIL import Image
+
+    rgb = image.convert("RGB")  # type: ignore[attr-defined]
+    size = scaled_size(rgb.width, rgb.height, max_side)
+    return np.asarray(rgb if size == rgb.size else rgb.resize(size, Image.Resampling.BILINEAR))
+
+
+def _read_gif(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
     from PIL import Image, ImageSequence
 
     try:
         with Image.open(path) as im:
             frames, durations = [], []
             for frame in ImageSequence.Iterator(im):
-                frames.append(np.asarray(frame.convert("RGB")))
+                frames.append(_pil_rgb(frame, max_side))
                 durations.append(frame.info.get("duration"))
                 if max_frames is not None and len(frames) >= max_frames:
                     break
@@ -120,7 +205,7 @@ def _read_gif(path: Path, max_frames: int | None) -> tuple[list[np.ndarray], flo
     return frames, 1000.0 / base
 
 
-def _read_image_folder(path: Path, max_frames: int | None) -> list[np.ndarray]:
+def _read_image_folder(path: Path, max_frames: int | None, max_side: int | None = None) -> list[np.ndarray]:
     from PIL import Image
 
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
@@ -130,7 +215,7 @@ def _read_image_folder(path: Path, max_frames: int | None) -> list[np.ndarray]:
     for f in files[:max_frames]:
         try:
             with Image.open(f) as im:
-                frames.append(np.asarray(im.convert("RGB")))
+                frames.append(_pil_rgb(im, max_side))
         except Exception as exc:
             raise UserInputError(f"{f}: cannot read image ({exc})") from None
     if len({fr.shape for fr in frames}) > 1:

@@ -89,7 +89,8 @@ def test_unreadable_and_too_short_targets(tmp_path):
     proc = run_cli("refine", "--plugin", "pendulum", "--target", str(bad), "--out", str(tmp_path / "r"), check=False)
     assert proc.returncode == 2 and "cannot decode the video" in proc.stderr
     short = tmp_path / "short.mp4"
-    write_video(short, Clip(np.zeros((10, 64, 64, 3), np.uint8), 25.0))
+    noise = np.random.default_rng(0).integers(0, 255, (10, 64, 64, 3), dtype=np.uint8)  # moving, too short
+    write_video(short, Clip(noise, 25.0))
     proc = run_cli("refine", "--plugin", "pendulum", "--target", str(short), "--out", str(tmp_path / "r"), check=False)
     assert proc.returncode == 2
     assert "too short" in proc.stderr and "needs at least 100 frames" in " ".join(proc.stderr.split())

@@ -210,3 +210,46 @@ def test_side_by_side_cuts_to_the_shortest_clip() -> None:
     out = side_by_side([a, b], height=32)
     assert out.fps == 25.0 and out.n_frames == 10
     assert out.size == (32, 43 + 32)
+
+
+# --------------------------------------------------------------- a user's target video
+
+
+def _moving(n: int, height: int, width: int) -> np.ndarray:
+    """A bright square sliding across a dark frame."""
+    frames = np.zeros((n, height, width, 3), np.uint8)
+    side = max(4, min(height, width) // 4)
+    for t in range(n):
+        x = (t * 7) % max(1, width - side)
+        frames[t, height // 3 : height // 3 + side, x : x + side] = 220
+    return frames
+
+
+def test_a_large_target_is_downscaled_while_decoding_and_a_long_one_is_cut(tmp_path, caplog):
+    from physinfer.video import read_target_video
+
+    path = write_video(tmp_path / "wide.mp4", Clip(_moving(12, 600, 1000), 25.0))
+    clip = read_target_video(path, max_side=250)
+    assert clip.frames.shape == (12, 150, 250, 3)
+    with caplog.at_level("WARNING"):
+        cut = read_target_video(path, max_side=250, max_bytes=5 * 150 * 250 * 3)
+    assert cut.frames.shape[0] == 5 and "only its first 0.2 s are used" in caplog.text
+
+
+def test_a_static_or_tiny_target_is_refused_with_one_line(tmp_path, physinfer_cli):
+    from physinfer.errors import UserInputError
+    from physinfer.video import read_target_video
+
+    rng = np.random.default_rng(0)
+    still = np.repeat(rng.integers(0, 255, (1, 96, 128, 3), dtype=np.uint8), 30, axis=0)
+    static = write_video(tmp_path / "still.mp4", Clip(still, 25.0))
+    with pytest.raises(UserInputError, match="nothing moves in this video"):
+        read_target_video(static)
+    for height in (1, 2):
+        strip = write_video(tmp_path / f"strip{height}.gif", Clip(_moving(20, height, 128), 25.0))
+        with pytest.raises(UserInputError, match=f"128×{height} pixels; a target needs at least 32"):
+            read_target_video(strip)
+    proc = physinfer_cli("refine", "--plugin", "pendulum", "--target", static, "--steps", "2",
+                         "--out", tmp_path / "run", "--json")  # fmt: skip
+    assert proc.returncode == 2 and "nothing moves" in proc.json()["error"]
+    assert not (tmp_path / "run" / "trials.jsonl").exists()
