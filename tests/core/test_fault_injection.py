@@ -5,9 +5,9 @@ seeded generator (after some completed units of work, plus a random delay, so a 
 anywhere: during start-up, inside a trial, between two appends), and continued; the
 finished run must equal an uninterrupted run of the same seed — the same trial log (θ,
 coordinates, distances; no trial twice, none missing), the same dataset files, the same
-final weights. The default run kills refine, dataset generate and train once each on their
-cheapest settings; the ``slow`` tests kill diagnose once, and every command at least ten
-times, resuming in between.
+final weights. The default run kills refine, diagnose, dataset generate and train once each
+on their cheapest settings; the ``slow`` test kills every command at least ten times,
+resuming in between.
 
 ``dataset generate`` also runs worker processes: they must die with their killed parent.
 """
@@ -335,7 +335,6 @@ def test_refine_killed_once_resumes_to_the_uninterrupted_run(physinfer_cli, tmp_
     kill_and_resume(physinfer_cli, refine_command(steps=4), tmp_path, kills=1, seed=0)
 
 
-@pytest.mark.slow  # its cheapest run takes ~25 s and the test needs two: too long for the default run
 def test_diagnose_killed_once_resumes_to_the_uninterrupted_run(physinfer_cli, tmp_path):
     kill_and_resume(physinfer_cli, diagnose_command(steps=3), tmp_path, kills=1, seed=0)
 

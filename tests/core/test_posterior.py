@@ -445,3 +445,27 @@ def test_no_refined_posterior_without_a_noise_scale_or_enough_trials():
     for words, (xs, ds, fl) in cases.items():
         post, why = refine_posterior(samples, m, space, xs, ds, fl, box)
         assert post is None and words in why, (words, why)
+
+
+def test_refine_prints_digits_only_for_what_the_video_determines():
+    from physinfer.cli.app import refine_result_lines
+    from physinfer.refine import RefineResult
+
+    def marginal(label: str) -> dict:
+        return {"median": 5.0, "ci50": [4.5, 5.5], "ci90": [4.0, 6.0], "contraction": 0.9, "label": label, "unit": ""}
+
+    result = RefineResult(
+        best_params={"wind": 5.2, "weight": 0.17, "bend": 9.9}, best_distance=0.02, best_step=3,
+        ground_truth={"wind": 5.0, "weight": 0.12, "bend": 1.0}, abs_errors={"wind": 0.2, "weight": 0.05, "bend": 8.9},
+        n_trials=8, n_failed=0, wall_time_s=1.0, timings={}, run_dir="runs/x",
+        extra={
+            "posterior": {"wind": marginal("identified"), "weight": marginal("not identified"), "bend": marginal("not identified")},
+            "at_bounds": {"weight": "upper", "bend": "upper"},
+            "posterior_source": {"kind": "refined", "modelled": ["wind"], "estimator": "/a/est.safetensors"},
+        },
+    )  # fmt: skip
+    text = "\n".join(refine_result_lines(result))
+    assert "wind = 5.2   posterior 5 [90 %: 4 – 6]   identified   (truth 5, error 0.2)" in text
+    assert "not identified (the video barely narrows their ranges" in text and "weight, bend" in text
+    assert "error 8.9" not in text and "bound" not in text  # no digits, no bound warning for them
+    assert "posterior: refined by this run's trials" in text and "est.safetensors" in text

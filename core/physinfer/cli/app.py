@@ -452,29 +452,46 @@ def refine_cmd(
     if as_json:
         emit_json(summary)
         return
-    err_console.print(f"[bold]best distance[/] {result.best_distance:.4g} at step {result.best_step}")
-    at_bounds = result.extra.get("at_bounds", {})
+    for line in refine_result_lines(result):
+        err_console.print(line, highlight=False)
+
+
+def refine_result_lines(result: Any) -> list[str]:
+    """What ``refine`` prints (without ``--json``): the parameters the video determines with
+    best fit, posterior median, 90 % interval and label; the others named on one line (their
+    best fit is where the search stopped, and a bound it stopped on says nothing either);
+    correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
+    lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
     marginals = result.extra.get("posterior") or {}
+    hidden = [n for n in result.best_params if marginals.get(n, {}).get("label") == "not identified"]
+    at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}
     for name, value in result.best_params.items():
-        err_console.print(best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name)), highlight=False)
+        if name not in hidden:
+            lines.append(best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name)))
+    if hidden:
+        names = ", ".join(hidden) if len(hidden) <= 6 else f"{', '.join(hidden[:4])}, … ({len(hidden)} in all)"
+        lines.append(
+            f"  not identified (the video barely narrows their ranges; best fits and intervals in "
+            f"result.json): {names}"
+        )
     for pair in (result.extra.get("correlations") or [])[:2]:
-        err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
+        lines.append(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}")
     if result.extra.get("posterior_note"):
-        err_console.print(result.extra["posterior_note"], highlight=False)
+        lines.append(result.extra["posterior_note"])
     if result.extra.get("posterior_source"):
-        err_console.print(posterior_source_line(result.extra["posterior_source"]), highlight=False)
+        lines.append(posterior_source_line(result.extra["posterior_source"]))
     for name, value in result.extra.get("fixed", {}).items():
-        err_console.print(f"  {name} = {value:.4g}   (fixed)", highlight=False)
+        lines.append(f"  {name} = {value:.4g}   (fixed)")
     if at_bounds:
-        err_console.print(
+        lines.append(
             f"{', '.join(at_bounds)} ended on a bound of the search range: the truth may lie beyond it, "
-            "or another parameter is compensating for something the model lacks (`physinfer diagnose`).",
-            highlight=False,
+            "or another parameter is compensating for something the model lacks (`physinfer diagnose`)."
         )
     hint = noise_ratio_hint((result.extra.get("noise_floor") or {}).get("ratio"))
     if hint:
-        err_console.print(hint, highlight=False)
-    err_console.print(f"results in {result.run_dir}")
+        lines.append(hint)
+    lines.append(f"results in {result.run_dir}")
+    return lines
 
 
 def best_fit_line(name: str, value: float, result: Any, marginal: dict | None, bound: str | None) -> str:
