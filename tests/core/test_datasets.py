@@ -525,3 +525,30 @@ def test_cli_seeds_per_theta_gives_theta_groups_of_seeds_times_renders(wave_regi
     assert plain.exit_code == 2 and "seeds_per_theta" in json.loads(plain.stdout)["error"]
     bad = runner.invoke(dataset_app, [*args[:4], str(tmp_path / "e"), "--seeds-per-theta", "0", "--json"])
     assert bad.exit_code == 2 and "--seeds-per-theta must be a whole number" in json.loads(bad.stdout)["error"]
+
+
+def test_a_damaged_or_cut_manifest_is_refused_and_generate_rewrites_it(tmp_path, physinfer_cli):
+    from physinfer.datasets.loader import ClipDataset
+    from physinfer.errors import UserInputError
+
+    args = ["dataset", "generate", "--plugin", "pendulum", "--sims", "4,0,2", "--frames", "20", "--size", "32",
+            "--workers", "0", "--out", tmp_path / "d", "--json"]  # fmt: skip
+    assert physinfer_cli(*args).returncode == 0
+    manifest = tmp_path / "d" / "manifest.jsonl"
+    good = manifest.read_text()
+    n = len(ClipDataset(tmp_path / "d", "train"))
+    manifest.write_text(good[: len(good) // 2])  # cut mid-line
+    with pytest.raises(UserInputError, match=r"line \d+ is not a manifest row"):
+        ClipDataset(tmp_path / "d", "train")
+    manifest.write_text("".join(good.splitlines(keepends=True)[:3]))  # cut at a line boundary
+    with pytest.raises(UserInputError, match=f"train 3 of {n}"):
+        ClipDataset(tmp_path / "d", "train")
+    assert physinfer_cli(*args).returncode == 0  # generate again: the manifest is rewritten
+    assert manifest.read_text() == good
+
+
+def test_a_binary_model_file_is_one_clear_line(tmp_path, physinfer_cli):
+    model = tmp_path / "model.json"
+    model.write_bytes(bytes(range(256)) * 4)
+    proc = physinfer_cli("refine", "--plugin", "pendulum", "--model", model, "--out", tmp_path / "r", "--json")
+    assert proc.returncode == 2 and "is not JSON" in proc.json()["error"]

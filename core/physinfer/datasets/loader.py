@@ -65,9 +65,9 @@ class ClipDataset(Sequence[np.ndarray]):
         self.clip_format = ClipFormat.from_dict(config["preset"]["clip"])
         self.parameter_space = ParameterSpace.from_dict(config["parameters"])
         self.param_names: list[str] = self.parameter_space.names
-        self.rows: list[dict[str, Any]] = [
-            row for row in read_manifest(self.root) if split is None or row["split"] == split
-        ]
+        all_rows = read_manifest(self.root)
+        _check_counts(self.root, all_rows, info.get("renders"))
+        self.rows: list[dict[str, Any]] = [row for row in all_rows if split is None or row["split"] == split]
         self.sim_ids = np.array([row["sim"] for row in self.rows], dtype=np.int64)
         self.render_ids = np.array([row["render"] for row in self.rows], dtype=np.int64)
         self.params = np.array(
@@ -137,3 +137,17 @@ class ClipDataset(Sequence[np.ndarray]):
         state = self.__dict__.copy()
         state["_shards"] = {}
         return state
+
+
+def _check_counts(root: Path, rows: list[dict[str, Any]], expected: dict[str, int] | None) -> None:
+    """Refuse a manifest whose rows per split differ from what ``dataset.json`` recorded (a
+    manifest cut at a line boundary reads as valid JSON lines)."""
+    if not isinstance(expected, dict):
+        return  # written before the counts were recorded
+    found = {name: sum(row.get("split") == name for row in rows) for name in expected}
+    if found != {name: int(n) for name, n in expected.items()}:
+        listed = ", ".join(f"{name} {found[name]} of {expected[name]}" for name in expected)
+        raise UserInputError(
+            f"{root / MANIFEST_FILE} lists other renders than dataset.json records ({listed}): the manifest is "
+            f"damaged or cut; run `physinfer dataset generate --out {root}` again with the same settings"
+        )

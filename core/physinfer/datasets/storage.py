@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, atomic_write_text, to_jsonable
 
 FORMAT_NAME = "physinfer-dataset"
@@ -160,9 +161,27 @@ def write_manifest(root: Path, records: Iterable[Mapping[str, Any]]) -> int:
 
 
 def read_manifest(root: Path) -> list[dict[str, Any]]:
-    """The rows of ``manifest.jsonl``."""
-    with open(root / MANIFEST_FILE) as f:
-        return [json.loads(line) for line in f if line.strip()]
+    """The rows of ``manifest.jsonl``.
+
+    Raises:
+        UserInputError: a line that is not a JSON object (a damaged or cut manifest).
+    """
+    rows = []
+    with open(root / MANIFEST_FILE, encoding="utf-8", errors="replace") as f:
+        for number, line in enumerate(f, start=1):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                row = None
+            if not isinstance(row, dict):
+                raise UserInputError(
+                    f"{root / MANIFEST_FILE}: line {number} is not a manifest row (the file is damaged or cut); "
+                    f"run `physinfer dataset generate --out {root}` again with the same settings to rewrite it"
+                )
+            rows.append(row)
+    return rows
 
 
 def directory_bytes(root: Path) -> int:

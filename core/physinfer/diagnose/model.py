@@ -85,9 +85,9 @@ def read_model(path: Path) -> ModelFile:
     if not path.is_file():
         raise UserInputError(f"--model {path}: no such file (physinfer diagnose writes model.json in its --out)")
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise UserInputError(f"--model {path} is not JSON ({exc})") from None
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise UserInputError(f"--model {path} is not JSON ({exc}); give the model.json physinfer diagnose wrote") from None
     if not isinstance(data, dict) or data.get("format") != MODEL_FORMAT:
         raise UserInputError(f"--model {path} is not a physinfer model file (expected format {MODEL_FORMAT!r})")
     try:
