@@ -347,6 +347,18 @@ def test_train_killed_once_resumes_to_the_same_weights(physinfer_cli, stripes, t
     kill_and_resume(physinfer_cli, train_command(stripes, epochs=2), tmp_path, kills=1, seed=0)
 
 
+def test_train_killed_after_its_last_checkpoint_leaves_the_full_history(physinfer_cli, stripes, tmp_path):
+    """The window a seeded kill once hit: the checkpoint holds every epoch, history.json the
+    one before; the resumed run trains nothing and must still write the full history."""
+    command = train_command(stripes, epochs=2)
+    out = tmp_path / "killed"
+    finish(physinfer_cli, command, out, resume=False)
+    full = json.loads((out / "history.json").read_text())
+    (out / "history.json").write_text(json.dumps({"history": full["history"][:1], "best": full["history"][0]}))
+    finish(physinfer_cli, command, out, resume=True)
+    assert without_timings(json.loads((out / "history.json").read_text())) == without_timings(full)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1])
 @pytest.mark.parametrize("name", ["refine", "diagnose", "dataset", "train"])

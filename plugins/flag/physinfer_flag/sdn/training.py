@@ -492,6 +492,9 @@ def train_sdn(
             if "val_triplet_accuracy" in record:
                 summary += f" · val acc {record['val_triplet_accuracy']:.3f}"
             bar.update(epochs_task, advance=1, info=summary)
+    # Again after the loop: a run killed between the checkpoint and history.json resumes with
+    # every epoch done, runs none, and would otherwise leave the older history behind.
+    atomic_write_json(out / HISTORY_FILE, {"history": history, "best": best})
 
     if not weights_path.is_file():  # epochs=0: still leave usable (untrained) weights
         save_sdn(
