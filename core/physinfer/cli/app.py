@@ -398,8 +398,9 @@ def refine_cmd(
         Path | None,
         typer.Option(
             "--posterior",
-            help="Posterior estimator (`physinfer posterior train`): report the target's posterior "
-            "and start the search at its median. Default: the plugin's shipped one, where it applies.",
+            help="Posterior estimator (`physinfer posterior train`): start the search at the target's "
+            "posterior median, search the region it covers, and report the posterior refined by the "
+            "trials. Default: the plugin's shipped one, where it applies.",
         ),
     ] = None,
     no_posterior: Annotated[
