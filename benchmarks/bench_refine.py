@@ -153,14 +153,12 @@ def _posterior_rows(result: Any, amortized: Any, space: Any, post_start: Any, ta
     one: the amortized samples reweighted by the trials' likelihood), the amortized one it
     started from, and the one refined with the other proposal (uniform over the search box):
     one row each."""
-    from physinfer.posterior.refined import refine_posterior, report_posterior
+    from physinfer.posterior.refined import refine_posterior, report_posterior, trial_arrays
 
     report_posterior(result, amortized, space, post_start, out, seed=0)
-    ok = [t for t in result.trials if t.distance is not None]
     box, _ = refine_posterior(
-        amortized.samples_unit, amortized.marginals, space, np.array([t.x for t in ok]),
-        np.array([t.distance for t in ok]), (result.extra.get("noise_floor") or {}).get("pairwise") or [],
-        post_start.box, method="box", seed=0,
+        amortized.samples_unit, amortized.marginals, space, *trial_arrays(result, len(space.names)),
+        (result.extra.get("noise_floor") or {}).get("pairwise") or [], post_start.box, method="box", seed=0,
     )
     return {
         "posterior": _posterior_row(result.extra["posterior"], target.truth),

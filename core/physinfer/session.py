@@ -357,7 +357,7 @@ def refine(
     run_info.update(optional_settings(fixed_values, duration_s, embedder_frames))
     run_info.update(resume_identity(target, weights))
     factory = registry.get("optimizers", optimizer).load()
-    start_x = None
+    start_x, post_start = None, None
     if model_file is not None:
         from physinfer.diagnose.warmstart import warm_start_factory
 
@@ -375,7 +375,7 @@ def refine(
         run_info["start"] = {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical}
     # Every trial's coordinates depend on the warm start and the search box: part of the identity.
     run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
-    if amortized is not None and model_file is None:
+    if post_start is not None:
         run_info["search_box"] = [[float(v) for v in ends] for ends in post_start.box]
     from physinfer.trial_workers import PipelineSpec, trial_workers
 

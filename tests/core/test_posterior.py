@@ -469,3 +469,26 @@ def test_refine_prints_digits_only_for_what_the_video_determines():
     assert "not identified (the video barely narrows their ranges" in text and "weight, bend" in text
     assert "error 8.9" not in text and "bound" not in text  # no digits, no bound warning for them
     assert "posterior: refined by this run's trials" in text and "est.safetensors" in text
+
+
+def test_refine_from_a_model_file_with_a_posterior_reports_it_without_a_search_box(
+    pendulum_estimator, tmp_path, physinfer_cli
+):
+    """``--model`` (a diagnosis with no effect named) warm-starts the search; the posterior is
+    still reported, with no search box of its own."""
+    from physinfer.diagnose.model import write_model
+    from physinfer.plugins import load_registry
+
+    path, _ = pendulum_estimator
+    space = load_registry()[0].phenomenon("pendulum").make_simulator([]).parameter_space
+    model = write_model(tmp_path / "model.json", plugin="pendulum", effects=[], space=space,
+                        values={"length": 1.2, "damping": 0.1, "amplitude": 40.0})  # fmt: skip
+    out = tmp_path / "run"
+    result = physinfer_cli(
+        "refine", "--plugin", "pendulum", "--model", tmp_path / "model.json", "--posterior", path,
+        "--steps", "3", "--noise-samples", "0", "--floor-samples", "0", "--out", out, "--json",
+    ).json()  # fmt: skip
+    assert set(result["posterior"]) == {"length", "damping", "amplitude"}
+    assert "search_box" not in result["posterior_source"]
+    first = json.loads((out / "trials.jsonl").read_text().splitlines()[0])["params"]
+    assert first == pytest.approx(model.values)

@@ -246,11 +246,18 @@ def posterior_start(report: Any, space: ParameterSpace) -> PosteriorStart:
 SAMPLES_FILE = "posterior_samples.npz"
 
 
+def trial_arrays(result: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(x (N, dim), distance (N,))`` of a refinement's successful trials."""
+    ok = [t for t in result.trials if t.distance is not None]
+    x = np.array([t.x for t in ok], dtype=float).reshape(len(ok), dim)
+    return x, np.array([t.distance for t in ok], dtype=float)
+
+
 def report_posterior(
     result: Any,
     amortized: Any,
     space: ParameterSpace,
-    start: PosteriorStart,
+    start: PosteriorStart | None,
     run_dir: Path,
     *,
     seed: int = 0,
@@ -260,14 +267,15 @@ def report_posterior(
 
     ``posterior`` is the refined posterior when the trials give one, else the amortized one
     (``posterior_source`` says which, and why not refined); ``posterior_amortized`` is always
-    the amortized one, so the two can be compared.
+    the amortized one, so the two can be compared. ``start`` is ``None`` when the search did
+    not start from this posterior (``refine --model``).
     """
-    ok = [t for t in result.trials if t.distance is not None]
-    floor = result.extra.get("noise_floor") or {}
+    trials_x, trials_d = trial_arrays(result, len(space.names))
+    floor = (result.extra.get("noise_floor") or {}).get("pairwise") or []
+    # Without a search box (a --model warm start searched the whole space) the box is the prior's.
+    box = start.box if start is not None else (-np.ones(len(space.names)), np.ones(len(space.names)))
     refined, note = refine_posterior(
-        amortized.samples_unit, amortized.marginals, space,
-        np.array([t.x for t in ok], dtype=float).reshape(len(ok), len(space.names)),
-        np.array([t.distance for t in ok], dtype=float), floor.get("pairwise") or [], start.box,
+        amortized.samples_unit, amortized.marginals, space, trials_x, trials_d, floor, box,
         method=method, seed=seed,
     )  # fmt: skip
     source: dict[str, Any] = {"kind": "amortized", "estimator": str(amortized.estimator)}
@@ -282,7 +290,8 @@ def report_posterior(
         arrays["refined"] = refined.samples_unit.astype(np.float32)
     else:
         source["not_refined"] = note
-    source["search_box"] = start.box_physical
+    if start is not None:
+        source["search_box"] = start.box_physical
     result.extra["posterior"] = chosen_marginals
     result.extra["correlations"] = chosen_corr
     result.extra["posterior_amortized"] = amortized.marginals
