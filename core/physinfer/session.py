@@ -423,7 +423,7 @@ class _progress:
             TimeRemainingColumn,
         )
 
-        from physinfer.cli.app import err_console
+        from physinfer.console import err_console
 
         self._bar = Progress(
             TextColumn("refining"),

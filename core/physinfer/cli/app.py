@@ -26,9 +26,8 @@ from rich.console import Console
 from rich.markup import escape
 from typer.exceptions import TyperException
 
+from physinfer.console import err_console
 from physinfer.errors import PhysinferError, UserInputError
-
-err_console = Console(stderr=True)
 
 app = typer.Typer(
     name="physinfer",
