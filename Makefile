@@ -62,14 +62,15 @@ test-all: install
 lint: install
 	$(BIN)/ruff check core plugins tests examples benchmarks
 
-# The API reference (pdoc, Google-style docstrings) of the public API: the top-level names,
+# The API reference (pdoc, Google-style docstrings) of the public API: the library API
+# (physinfer.api), the top-level names,
 # the roles, parameters, value types, hooks and registry, rendering helpers, settings and
 # the testing kit; the other physinfer modules are left out ('!physinfer\..*'). Open
 # docs/api/index.html. tests/core/test_api_docs.py reads this list.
 API_MODULES := physinfer '!physinfer\..*' physinfer.roles physinfer.parameters physinfer.types \
 	physinfer.errors physinfer.hooks physinfer.registry physinfer.plugins physinfer.rendering \
 	physinfer.settings physinfer.testing physinfer.testing.effects physinfer.testing.sensitivity \
-	physinfer.testing.fixtures
+	physinfer.testing.fixtures physinfer.api physinfer.api.options physinfer.api.results
 docs: install
 	rm -rf docs/api
 	$(BIN)/python -m pdoc -d google -o docs/api $(API_MODULES)

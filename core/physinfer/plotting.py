@@ -7,14 +7,11 @@ import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure  # no pyplot: no backend or global state to disturb
 
-matplotlib.use("Agg")  # files only; never needs a display
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from physinfer.io import atomic_path  # noqa: E402
-from physinfer.rundir import TrialRecord  # noqa: E402
+from physinfer.io import atomic_path
+from physinfer.rundir import TrialRecord
 
 
 def plot_refinement(
@@ -24,19 +21,29 @@ def plot_refinement(
     max_params: int = 17,
     bands: Mapping[str, Mapping[str, object]] | None = None,
 ) -> Path:
-    """Draw distance (and best so far) and every parameter against the step.
+    """Write :func:`refinement_figure` to ``path`` (PNG, atomically) and return ``path``."""
+    fig = refinement_figure(trials, truth, max_params=max_params, bands=bands)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    return Path(path)
+
+
+def refinement_figure(
+    trials: Sequence[TrialRecord],
+    truth: Mapping[str, float] | None,
+    *,
+    max_params: int = 17,
+    bands: Mapping[str, Mapping[str, object]] | None = None,
+) -> Figure:
+    """Distance (and best so far) and every parameter against the step.
 
     Args:
         trials: Logged trials in step order.
         truth: Ground truth by name, drawn dashed; ``None`` for real targets.
-        path: PNG to write (atomically).
         max_params: Parameters drawn at most (in space order).
         bands: The posterior's marginals by name (``ci90`` and ``label``, see
             :func:`physinfer.posterior.summary.marginals`): the 90 % interval is shaded
             and the label added to the panel's title.
-
-    Returns:
-        ``path``.
     """
     steps = np.array([t.step for t in trials])
     dist = np.array([np.nan if t.distance is None else t.distance for t in trials], dtype=float)
@@ -45,7 +52,8 @@ def plot_refinement(
     n_panels = 1 + len(names)
     ncols = min(4, n_panels)
     nrows = math.ceil(n_panels / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 2.6 * nrows), squeeze=False)
+    fig = Figure(figsize=(3.6 * ncols, 2.6 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     ax = axes.flat[0]
     ax.plot(steps, dist, "o-", ms=3, lw=1, label="distance")
     ax.plot(steps, np.where(np.isinf(best), np.nan, best), "k-", lw=1.5, label="best so far")
@@ -71,7 +79,4 @@ def plot_refinement(
     for ax in axes.flat[n_panels:]:
         ax.axis("off")
     fig.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return fig

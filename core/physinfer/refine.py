@@ -165,6 +165,23 @@ class RefineResult:
         out.update(out.pop("extra"))
         return out
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer refine --json`` prints (``result.json``)."""
+        return self.summary()
+
+    @property
+    def posterior(self) -> dict[str, dict[str, Any]]:
+        """Per parameter: ``median``, ``ci50``, ``ci90`` and ``label`` (identified, weakly
+        identified, not identified); ``{}`` when no posterior estimator applied."""
+        return dict(self.extra.get("posterior") or {})
+
+    def plot(self, max_params: int = 17) -> Any:
+        """Distance and every parameter against the step, with the 90 % intervals shaded and
+        the truth dashed where known (a matplotlib figure; ``refinement.png`` is the same)."""
+        from physinfer.plotting import refinement_figure
+
+        return refinement_figure(self.trials, self.ground_truth, max_params=max_params, bands=self.posterior or None)
+
 
 @dataclass
 class Pipeline:

@@ -7,7 +7,7 @@ The CLI calls these functions; notebooks and benchmarks can call them too.
 from __future__ import annotations
 
 import fnmatch
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -260,7 +260,7 @@ def refine(
     out: Path,
     resume: bool = False,
     overwrite: bool = False,
-    progress: bool = True,
+    progress: bool | Callable[[int, int, float], None] = True,
     noise_samples: int = 3,
     seeds_per_trial: int = 1,
     floor_samples: int = 4,
@@ -407,12 +407,16 @@ def refine(
 
 
 class _progress:
-    """A rich progress bar on stderr showing the best distance; yields an ``on_trial`` callback."""
+    """A rich progress bar on stderr showing the best distance, or the caller's callback
+    ``(done, total, best_distance)``; yields an ``on_trial`` callback."""
 
-    def __init__(self, total: int, enabled: bool) -> None:
+    def __init__(self, total: int, enabled: bool | Callable[[int, int, float], None]) -> None:
         self.total, self.enabled = total, enabled
 
     def __enter__(self):  # noqa: ANN204
+        if callable(self.enabled):
+            report = self.enabled
+            return lambda record, best: report(record.step + 1, self.total, best)
         if not self.enabled:
             return None
         from rich.progress import (
@@ -443,5 +447,5 @@ class _progress:
         return on_trial
 
     def __exit__(self, *exc: object) -> None:
-        if self.enabled:
+        if self.enabled is True:
             self._bar.__exit__(*exc)

@@ -1,0 +1,296 @@
+"""physinfer as a library: every command of the CLI as a function returning a result object.
+
+::
+
+    import physinfer.api as pi
+
+    sim = pi.simulate("pendulum", set={"length": 1.2})
+    result = pi.refine("pendulum", steps=20, out="runs/pendulum")
+    result.best_params, result.posterior, result.to_dict(), result.plot()
+
+(The functions live here rather than at the top level because ``physinfer.refine`` and
+``physinfer.diagnose`` are the modules of the loop and of the diagnosis.)
+
+The keyword arguments are the CLI's options (``--batch-size`` is ``batch_size``,
+``--render-set NAME=VALUE`` is ``render_set={NAME: VALUE}``); each command's settings are one
+frozen dataclass (:class:`RefineOptions`, ...) that may also be passed whole, with keywords
+replacing its fields. The CLI is a thin shell over these functions. Nothing is printed:
+``progress=True`` shows rich progress bars on stderr, and a callable receives progress.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from physinfer.api.options import (
+    DiagnoseOptions,
+    InferOptions,
+    ModelOptions,
+    RefineOptions,
+    SearchOptions,
+    SimulateOptions,
+    TargetOptions,
+    as_assignments,
+    as_names,
+    with_settings,
+)
+from physinfer.api.results import Diagnosis, Simulation
+from physinfer.errors import UserInputError
+
+__all__ = [
+    "DiagnoseOptions",
+    "Diagnosis",
+    "InferOptions",
+    "ModelOptions",
+    "RefineOptions",
+    "SearchOptions",
+    "SimulateOptions",
+    "Simulation",
+    "TargetOptions",
+    "diagnose",
+    "infer",
+    "refine",
+    "registry",
+    "simulate",
+]
+
+#: ``progress``: ``True`` for rich bars on stderr, or ``(done, total, best_distance) -> None``.
+Progress = bool | Callable[[int, int, float], None]
+
+
+@functools.cache
+def registry() -> Any:
+    """The registry of every installed plugin, loaded once per process."""
+    from physinfer.plugins import load_registry
+
+    return load_registry()[0]
+
+
+def _optional(path: Path | str | None) -> Path | None:
+    return None if path is None else Path(path)
+
+
+def _default_out(prefix: str) -> Path:
+    return Path("runs") / f"{prefix}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def simulate(plugin: str, options: SimulateOptions | None = None, **settings: Any) -> Simulation:
+    """Simulate a phenomenon once and render it (``physinfer simulate``).
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        **settings: Fields of :class:`SimulateOptions` (``set``, ``effects``, ``render_set``,
+            ``seed``, ``duration``, ``out``, ``trajectory_out``, ...).
+
+    Raises:
+        UserInputError: an unknown parameter, render setting or effect; a bad output path.
+    """
+    from physinfer.parameters import parse_float_assignments
+    from physinfer.session import build_pipeline, naming_effects
+
+    o = with_settings(SimulateOptions, options, settings)
+    effects = as_names(o.effects, "effects")
+    out, trajectory_out = _optional(o.out), _optional(o.trajectory_out)
+    _check_simulate_outputs(out, trajectory_out)
+    pipeline = build_pipeline(
+        registry(), plugin, effects=effects, embedder="", duration_s=o.duration, **_scene(o)
+    )
+    with naming_effects(
+        registry(), plugin, effects, "--set"
+    ):  # an effect's parameter: name the effect
+        params = pipeline.simulator.parameter_space.complete(
+            parse_float_assignments(as_assignments(o.set, "set"))
+        )
+    render = o.render or out is not None
+    # Check ζ before simulating: a typo should not cost a simulation.
+    zeta = pipeline.renderer.check_render_params(
+        {**pipeline.renderer.default_render_params, **o.render_set}
+    )
+    t0 = time.perf_counter()
+    trajectory = pipeline.simulator.simulate(params, seed=o.seed)
+    sim = Simulation(
+        plugin, params, effects, o.seed, trajectory, seconds={"simulate": time.perf_counter() - t0}
+    )
+    if trajectory_out is not None:
+        trajectory.save(trajectory_out)
+        sim.paths["trajectory"] = str(trajectory_out)
+    if render:
+        t1 = time.perf_counter()
+        sim.clip, sim.render_params = pipeline.renderer.render(trajectory, zeta), zeta
+        sim.seconds["render"] = time.perf_counter() - t1
+    if out is not None:
+        from physinfer.video import write_video
+
+        write_video(out, sim.clip)
+        sim.paths["video"] = str(out)
+    pipeline.renderer.close()
+    return sim
+
+
+def _check_simulate_outputs(out: Path | None, trajectory_out: Path | None) -> None:
+    if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
+        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+    for option, path in (("--out", out), ("--trajectory-out", trajectory_out)):
+        if path is not None and path.is_dir():
+            raise UserInputError(f"{option} {path} is a directory; give a file name")
+
+
+def _scene(o: ModelOptions) -> dict[str, Any]:
+    """``scene_set`` for the session functions, only when given (phenomena without scene
+    settings then never see it)."""
+    return {"scene_set": dict(o.scene_set)} if o.scene_set else {}
+
+
+def refine(
+    plugin: str,
+    options: RefineOptions | None = None,
+    *,
+    progress: Progress = False,
+    **settings: Any,
+) -> Any:
+    """Refine a simulation until it matches a video (``physinfer refine``).
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        progress: ``True`` for a rich progress bar on stderr, or a callable
+            ``(done, total, best_distance)`` called after every trial.
+        **settings: Fields of :class:`RefineOptions` (``target``, ``steps``, ``batch_size``,
+            ``fix``, ``render_set``, ``out``, ``resume``, ...).
+
+    Returns:
+        The :class:`~physinfer.refine.RefineResult`: ``best_params``, ``posterior`` (the
+        90 % intervals and identifiability labels, when an estimator applies), the files
+        written to ``run_dir``, ``to_dict()`` and ``plot()``.
+    """
+    from physinfer.session import refine as run
+
+    o = with_settings(RefineOptions, options, settings)
+    if o.resume and o.out is None:
+        raise UserInputError("--resume needs --out DIR (the run directory to continue)")
+    return run(
+        registry(),
+        plugin=plugin,
+        target_path=_optional(o.target),
+        fps=o.fps,
+        truth=as_assignments(o.truth, "truth"),
+        steps=o.steps,
+        optimizer=o.optimizer,
+        embedder=o.embedder,
+        weights=_optional(o.weights),
+        device=o.device,
+        effects=as_names(o.effects, "effects"),
+        model=_optional(o.model),
+        render_set=dict(o.render_set),
+        fixed=as_assignments(o.fix, "fix"),
+        seed=o.seed,
+        out=_optional(o.out) or _default_out(plugin),
+        resume=o.resume,
+        overwrite=o.overwrite,
+        progress=progress,
+        noise_samples=o.noise_samples,
+        seeds_per_trial=o.seeds_per_trial,
+        floor_samples=o.floor_samples,
+        select_top=o.select_top,
+        select_seeds=o.select_seeds,
+        batch_size=o.batch_size,
+        workers=o.workers,
+        scheduler=o.scheduler,
+        duration_s=o.duration,
+        embedder_frames=o.embedder_frames,
+        posterior=_optional(o.posterior),
+        use_posterior=not o.no_posterior,
+        **_scene(o),
+    )
+
+
+def diagnose(
+    plugin: str,
+    options: DiagnoseOptions | None = None,
+    *,
+    log: Callable[[str], None] | None = None,
+    **settings: Any,
+) -> Diagnosis:
+    """Find where the refined model disagrees with the video and name the missing effect
+    (``physinfer diagnose``).
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        log: Called with one line per stage (``None``: silent).
+        **settings: Fields of :class:`DiagnoseOptions`.
+    """
+    from physinfer.diagnose.decide import DecisionRule
+    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+
+    o = with_settings(DiagnoseOptions, options, settings)
+    out = _optional(o.out) or _default_out(f"diagnose-{plugin}")
+    diagnose_settings = DiagnoseSettings(
+        plugin=plugin,
+        out=out,
+        target_path=_optional(o.target),
+        fps=o.fps,
+        truth=as_assignments(o.truth, "truth"),
+        render_set=dict(o.render_set),
+        steps=o.steps,
+        effect_steps=o.effect_steps,
+        optimizer=o.optimizer,
+        embedder=o.embedder,
+        embedder_frames=o.embedder_frames,
+        duration_s=o.duration,
+        fixed=as_assignments(o.fix, "fix"),
+        weights=_optional(o.weights),
+        device=o.device,
+        seed=o.seed,
+        effects=as_names(o.effects, "effects"),
+        floor_samples=o.floor_samples,
+        select_top=o.select_top,
+        select_seeds=o.select_seeds,
+        batch_size=o.batch_size,
+        calibrate=o.calibrate,
+        calibration_runs=o.calibration_runs,
+        calibration_control=o.calibration_control,
+        rule=DecisionRule(
+            misspecified_factor=o.threshold,
+            calibration_summary=o.calibration_summary,
+            effect_evidence=not o.require_gap_test,
+        ),
+        videos=not o.no_video,
+        **_scene(o),
+    )
+    report = run_diagnosis(registry(), diagnose_settings, log=log)
+    return Diagnosis.from_report(report, out)
+
+
+def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> Any:
+    """The posterior of one video from an amortized estimator, in seconds (``physinfer infer``).
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        **settings: Fields of :class:`InferOptions` (``target``, ``posterior``, ``samples``, ...).
+
+    Returns:
+        The :class:`~physinfer.posterior.workflow.PosteriorReport`: ``marginals`` (median,
+        50 % and 90 % intervals, label per parameter), ``to_dict()`` and ``plot()``.
+    """
+    from physinfer.posterior.workflow import infer as run
+
+    o = with_settings(InferOptions, options, settings)
+    return run(
+        registry(),
+        plugin=plugin,
+        out=_optional(o.out) or _default_out(f"infer-{plugin}"),
+        target_path=_optional(o.target),
+        posterior=_optional(o.posterior),
+        fps=o.fps,
+        truth=as_assignments(o.truth, "truth"),
+        n_samples=o.samples,
+        seed=o.seed,
+        device=o.device,
+    )

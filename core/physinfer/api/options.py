@@ -1,0 +1,230 @@
+"""The settings of each command as one frozen dataclass, named as the CLI's options are.
+
+``--batch-size`` is ``batch_size``, ``--render-set NAME=VALUE`` is ``render_set={NAME: VALUE}``,
+a repeatable ``--effect`` is ``effects=(...)``. The options that ``simulate``, ``refine`` and
+``diagnose`` share are declared once, in :class:`ModelOptions`, which the others extend; the
+CLI builds these objects from its options and calls :mod:`physinfer.api`, so the command
+line and the library cannot drift (``tests/core/test_api.py`` checks the mapping).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from physinfer.errors import UserInputError
+
+Assignments = Mapping[str, Any] | Sequence[str]
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """What a model is and how its simulations are seen: shared by every command.
+
+    Attributes:
+        effects: Effects switched into the model (``--effect``).
+        embedder: Embedder name (``None``: the phenomenon's default).
+        weights: Embedder weights file (``None``: the shipped default).
+        device: torch device (``None``: CUDA when present, else CPU).
+        fix: Parameters held at known values and left out of the search:
+            ``{NAME: VALUE}`` (NAME may be a pattern such as ``"bend_*"``) or ``NAME=VALUE`` strings.
+        duration: Seconds every simulation records (``None``: the phenomenon's default).
+        embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
+        render_set: Render settings ζ for the simulations, ``{NAME: VALUE}``.
+        scene_set: The scene's known settings (e.g. the flag's size), ``{NAME: VALUE}``.
+        seed: Seed of the optimizer and of every simulation.
+    """
+
+    effects: tuple[str, ...] = ()
+    embedder: str | None = None
+    weights: Path | None = None
+    device: str | None = None
+    fix: Assignments = field(default_factory=dict)
+    duration: float | None = None
+    embedder_frames: int | None = None
+    render_set: Mapping[str, Any] = field(default_factory=dict)
+    scene_set: Mapping[str, Any] = field(default_factory=dict)
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class TargetOptions:
+    """The video to match (shared by ``refine``, ``diagnose`` and ``infer``).
+
+    Attributes:
+        target: Video file (``None``: the phenomenon's embedded target).
+        fps: Its frame rate when the file does not say.
+        truth: Known true values, for error reporting only: ``{NAME: VALUE}`` or strings.
+    """
+
+    target: Path | None = None
+    fps: float | None = None
+    truth: Assignments = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """How a refinement searches (shared by ``refine`` and ``diagnose``).
+
+    Attributes:
+        steps: Trials in all (``None``: the phenomenon's default).
+        optimizer: ``ax``, ``random``, ``cma`` or a plugin's.
+        floor_samples: Re-simulations of the best fit for the noise floor.
+        select_top: Re-simulate the best M trials under ``select_seeds`` fresh seeds and keep
+            the lowest mean distance (0: the lowest logged distance).
+        select_seeds: Fresh seeds per finalist.
+        batch_size: Trials proposed per optimizer step and simulated as one batch.
+    """
+
+    steps: int | None = None
+    optimizer: str = "ax"
+    floor_samples: int = 4
+    select_top: int = 0
+    select_seeds: int = 3
+    batch_size: int = 1
+
+
+@dataclass(frozen=True)
+class SimulateOptions(ModelOptions):
+    """``physinfer simulate``.
+
+    Attributes:
+        set: Parameter values ``{NAME: VALUE}`` (the rest take their defaults).
+        out: Video to write (``.mp4``/``.gif``); ``None``: none.
+        trajectory_out: Trajectory NPZ to write; ``None``: none.
+        render: Render the clip (``False``: the trajectory only).
+    """
+
+    set: Assignments = field(default_factory=dict)
+    out: Path | None = None
+    trajectory_out: Path | None = None
+    render: bool = True
+
+
+@dataclass(frozen=True)
+class RefineOptions(ModelOptions, TargetOptions, SearchOptions):
+    """``physinfer refine``.
+
+    Attributes:
+        out: Run directory (``None``: ``runs/<plugin>-<time>``).
+        resume: Continue the run in ``out``.
+        overwrite: Replace a finished run in ``out``.
+        model: Model file from ``physinfer diagnose`` (its effects, warm-started from its fit).
+        noise_samples: Re-simulations of the centre whose spread the optimizer is told.
+        seeds_per_trial: Seeds each trial's distance is averaged over.
+        workers: Local worker processes for each step's trials (``None``: in this process).
+        scheduler: A Dask scheduler address for the trials.
+        posterior: Posterior estimator file (``None``: the phenomenon's shipped one).
+        no_posterior: Use no posterior estimator (a best fit only).
+    """
+
+    out: Path | None = None
+    resume: bool = False
+    overwrite: bool = False
+    model: Path | None = None
+    noise_samples: int = 3
+    seeds_per_trial: int = 1
+    workers: int | None = None
+    scheduler: str | None = None
+    posterior: Path | None = None
+    no_posterior: bool = False
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
+    """``physinfer diagnose``.
+
+    Attributes:
+        out: Diagnosis directory (``None``: ``runs/diagnose-<plugin>-<time>``); run again to continue.
+        effect_steps: Trials per augmented model and for the control (``None``: ``steps``).
+        floor_samples: Re-simulations per gap measurement (at least 4).
+        calibrate: Run the self-consistency refinements that calibrate the null scale.
+        calibration_runs: How many.
+        calibration_control: Give each its own control, as the baseline has.
+        calibration_summary: ``max`` or ``median`` of their gaps.
+        threshold: The gap test finds the model misspecified above this many null scales.
+        require_gap_test: Name an effect only when the gap test alone finds a misspecification.
+        no_video: Skip the side-by-side video.
+    """
+
+    out: Path | None = None
+    effect_steps: int | None = None
+    floor_samples: int = 6
+    calibrate: bool = True
+    calibration_runs: int = 3
+    calibration_control: bool = True
+    calibration_summary: str = "max"
+    threshold: float = 2.0
+    require_gap_test: bool = False
+    no_video: bool = False
+
+
+@dataclass(frozen=True)
+class InferOptions(TargetOptions):
+    """``physinfer infer``.
+
+    Attributes:
+        posterior: Estimator file (``None``: the phenomenon's shipped one).
+        out: Directory for posterior.json, samples.npz and corner.png (``None``: ``runs/infer-<plugin>-<time>``).
+        samples: Posterior samples drawn.
+        seed: Seed of the sampling.
+        device: torch device.
+    """
+
+    posterior: Path | None = None
+    out: Path | None = None
+    samples: int = 5000
+    seed: int = 0
+    device: str | None = None
+
+
+Options = TypeVar("Options", SimulateOptions, RefineOptions, DiagnoseOptions, InferOptions)
+
+
+def with_settings(
+    kind: type[Options], options: Options | None, settings: Mapping[str, Any]
+) -> Options:
+    """``options`` (default: ``kind()``) with ``settings`` replacing its fields.
+
+    Raises:
+        UserInputError: an options object of another command, or a setting ``kind`` lacks
+            (naming the closest one).
+    """
+    base = kind() if options is None else options
+    if not isinstance(base, kind):
+        raise UserInputError(f"options: expected {kind.__name__}, got {type(base).__name__}")
+    names = [f.name for f in dataclasses.fields(kind)]
+    for name in settings:
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise UserInputError(f"{kind.__name__} has no setting {name!r}{hint}")
+    return dataclasses.replace(base, **settings)
+
+
+def as_assignments(value: Assignments, what: str) -> tuple[str, ...]:
+    """``{NAME: VALUE}`` or ``NAME=VALUE`` strings as the strings the CLI parses.
+
+    Raises:
+        UserInputError: anything else (say, a bare string, which would split into characters).
+    """
+    if isinstance(value, str):
+        raise UserInputError(
+            f"{what}: give {{NAME: VALUE}} or a list of 'NAME=VALUE' strings, not one string"
+        )
+    if isinstance(value, Mapping):
+        return tuple(f"{name}={val}" for name, val in value.items())
+    return tuple(str(item) for item in value)
+
+
+def as_names(value: Sequence[str] | str, what: str) -> tuple[str, ...]:
+    """A sequence of names (one name is accepted as itself, not split into characters)."""
+    if isinstance(value, str):
+        return (value,)
+    if not all(isinstance(item, str) for item in value):
+        raise UserInputError(f"{what}: give names (strings), got {list(value)!r}")
+    return tuple(value)

@@ -1,0 +1,149 @@
+"""Result objects of the API that have no home in the layers below it.
+
+:class:`~physinfer.refine.RefineResult` (``refine``) and
+:class:`~physinfer.posterior.workflow.PosteriorReport` (``infer``) are the loop's own
+results; a simulation and a diagnosis get theirs here. Each has ``to_dict()`` (the JSON
+the CLI prints) and ``plot()`` (a matplotlib figure).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.types import Clip, Trajectory
+
+
+@dataclass
+class Simulation:
+    """One simulation of a phenomenon and, when rendered, its clip.
+
+    Attributes:
+        plugin: The phenomenon.
+        params: Every parameter's value (the defaults filled in).
+        effects: Effects switched in.
+        seed: Seed of the simulation.
+        trajectory: The simulated trajectory.
+        clip: Its rendering (``None`` when not rendered).
+        render_params: ζ it was rendered with.
+        seconds: Time to simulate and to render.
+        paths: Files written (``video``, ``trajectory``).
+    """
+
+    plugin: str
+    params: dict[str, float]
+    effects: tuple[str, ...]
+    seed: int
+    trajectory: Trajectory
+    clip: Clip | None = None
+    render_params: dict[str, Any] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    paths: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer simulate --json`` prints."""
+        out: dict[str, Any] = {
+            "plugin": self.plugin,
+            "params": self.params,
+            "effects": list(self.effects),
+        }
+        out.update(seed=self.seed, simulate_s=self.seconds.get("simulate"))
+        out.update(n_frames=self.trajectory.n_frames, fps=self.trajectory.fps)
+        if "trajectory" in self.paths:
+            out["trajectory"] = self.paths["trajectory"]
+        if "video" in self.paths:
+            out.update(
+                render_s=self.seconds.get("render"),
+                video=self.paths["video"],
+                render_params=self.render_params,
+            )
+        return out
+
+    def plot(self, n: int = 6) -> Any:
+        """``n`` frames of the clip side by side (a matplotlib figure).
+
+        Raises:
+            ValueError: the simulation was not rendered.
+        """
+        if self.clip is None:
+            raise ValueError("this simulation was not rendered (simulate(..., render=True))")
+        from matplotlib.figure import Figure
+
+        frames = self.clip.frames
+        picks = np.linspace(0, len(frames) - 1, num=min(n, len(frames))).round().astype(int)
+        fig = Figure(figsize=(2.2 * len(picks), 2.4), layout="constrained")
+        for ax, i in zip(fig.subplots(1, len(picks), squeeze=False)[0], picks, strict=True):
+            ax.imshow(frames[i])
+            ax.set_title(f"t = {i / self.clip.fps:.2f} s", fontsize=8)
+            ax.axis("off")
+        return fig
+
+
+@dataclass
+class Diagnosis:
+    """What ``diagnose`` found: whether the model is misspecified and which effect it lacks.
+
+    Attributes:
+        misspecified: Whether the model disagrees with the video beyond its noise.
+        named_effect: The effect that closes the gap, or ``None``.
+        gap_before: The baseline fit's gap to the target.
+        gap_after: The gap with the named effect (the baseline's when none is named).
+        candidates: One dict per effect tried (gap, ratio, p-value, significance, ...).
+        out: The diagnosis directory.
+        report: Everything ``diagnosis.json`` holds.
+    """
+
+    misspecified: bool
+    named_effect: str | None
+    gap_before: float
+    gap_after: float
+    candidates: list[dict[str, Any]]
+    out: Path
+    report: dict[str, Any]
+
+    @classmethod
+    def from_report(cls, report: dict[str, Any], out: Path) -> Diagnosis:
+        """Wrap the report ``run_diagnosis`` returns."""
+        return cls(
+            misspecified=bool(report["misspecified"]),
+            named_effect=report.get("named_effect"),
+            gap_before=float(report["gap_before"]),
+            gap_after=float(report["gap_after"]),
+            candidates=list(report.get("candidates", [])),
+            out=Path(out),
+            report=report,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer diagnose --json`` prints (``diagnosis.json``)."""
+        return self.report
+
+    def plot(self) -> Any:
+        """Each model's gap to the target against the noise floor (a matplotlib figure)."""
+        from matplotlib.figure import Figure
+
+        labels = ["baseline"] + [c["effect"] for c in self.candidates]
+        gaps = [self.gap_before] + [float(c["gap"]) for c in self.candidates]
+        fig = Figure(figsize=(1.6 + 1.3 * len(labels), 3.4), layout="constrained")
+        ax = fig.subplots()
+        colours = ["C0"] + [
+            "C2" if c["effect"] == self.named_effect else "C7" for c in self.candidates
+        ]
+        ax.bar(range(len(labels)), gaps, color=colours, alpha=0.7, width=0.6)
+        for name, style in (("noise_floor", ":"), ("threshold", "-")):
+            if self.report.get(name) is not None:
+                ax.axhline(
+                    float(self.report[name]),
+                    color="C3",
+                    ls=style,
+                    lw=1,
+                    label=name.replace("_", " "),
+                )
+        ax.set_xticks(range(len(labels)), labels, rotation=20, fontsize=8)
+        ax.set_ylabel("gap to the target")
+        ax.set_title(f"named effect: {self.named_effect or 'none'}", fontsize=9)
+        ax.legend(fontsize=7)
+        return fig

@@ -1,0 +1,63 @@
+"""The Python API (``physinfer.api``): the CLI's commands as functions returning result objects,
+their settings as frozen dataclasses named as the CLI's options are."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from matplotlib.figure import Figure
+
+import physinfer.api as pi
+from physinfer.errors import UserInputError
+
+
+def test_simulate_returns_a_rendered_simulation_with_the_cli_json(tmp_path, physinfer_cli):
+    video = tmp_path / "a.mp4"
+    sim = pi.simulate("pendulum", set={"length": 1.2}, seed=3, out=video)
+    assert sim.params["length"] == 1.2 and sim.clip is not None and video.exists()
+    cli = physinfer_cli(
+        "simulate", "--plugin", "pendulum", "--set", "length=1.2", "--seed", "3",
+        "--out", tmp_path / "b.mp4", "--json",
+    ).json()  # fmt: skip
+    assert set(sim.to_dict()) == set(cli)
+    assert sim.to_dict()["params"] == cli["params"]
+    fig = sim.plot(n=4)
+    assert isinstance(fig, Figure) and len(fig.axes) == 4
+
+
+def test_a_misspelt_setting_names_the_closest_one():
+    with pytest.raises(UserInputError, match="no setting 'batchsize'.*'batch_size'"):
+        pi.refine("pendulum", batchsize=4)
+    with pytest.raises(UserInputError, match="not one string"):
+        pi.simulate("pendulum", set="length=1.2")
+
+
+def test_options_are_frozen_and_replaced_by_keywords():
+    base = pi.RefineOptions(steps=7, fix={"damping": 0.3})
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        base.steps = 3  # type: ignore[misc]
+    assert dataclasses.replace(base, batch_size=2).steps == 7
+    with pytest.raises(UserInputError, match="expected RefineOptions"):
+        pi.refine("pendulum", pi.DiagnoseOptions())
+
+
+def test_refine_matches_the_cli_and_reports_progress(tmp_path, physinfer_cli):
+    seen: list[tuple[int, int, float]] = []
+    settings = dict(steps=5, floor_samples=0, noise_samples=0, truth={"length": 1.0})
+    result = pi.refine(
+        "pendulum",
+        pi.RefineOptions(**settings),
+        out=tmp_path / "api",
+        progress=lambda done, total, best: seen.append((done, total, best)),
+    )
+    cli = physinfer_cli(
+        "refine", "--plugin", "pendulum", "--steps", "5", "--floor-samples", "0",
+        "--noise-samples", "0", "--truth", "length=1.0", "--out", tmp_path / "cli", "--json",
+    ).json()  # fmt: skip
+    ours = result.to_dict()
+    assert set(ours) - {"wall_time_s"} == set(cli) - {"wall_time_s"}
+    assert ours["best_params"] == cli["best_params"]  # the same seeded trials
+    assert [s[0] for s in seen] == [1, 2, 3, 4, 5] and {s[1] for s in seen} == {5}
+    assert seen[-1][2] == pytest.approx(result.best_distance)
+    assert isinstance(result.plot(), Figure)
