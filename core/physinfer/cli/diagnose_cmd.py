@@ -102,6 +102,22 @@ def diagnose_cmd(
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option("--out", help="Diagnosis directory (re-run to continue it).")] = None,
     no_video: Annotated[bool, typer.Option("--no-video", help="Skip the side-by-side video.")] = False,
+    limits: Annotated[
+        bool,
+        typer.Option(
+            "--limits/--no-limits",
+            help="Estimate each effect's detection limit (the weakest strength this clip could name) from a "
+            "ladder of simulations at the best baseline fit.",
+        ),
+    ] = True,
+    reveal: Annotated[
+        bool,
+        typer.Option(
+            "--reveal",
+            help="Also measure whether another camera view or a twice longer clip would lower the limits "
+            "(chaotic phenomena; re-renders and re-simulates the ladder).",
+        ),
+    ] = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
@@ -109,6 +125,7 @@ def diagnose_cmd(
 
     from physinfer.cli.app import registry_and_infos
     from physinfer.diagnose.decide import DecisionRule
+    from physinfer.diagnose.limits import LimitConfig, limit_line
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
 
     if out is None:
@@ -145,6 +162,8 @@ def diagnose_cmd(
             effect_evidence=not require_gap_test,
         ),
         videos=not no_video,
+        limits=limits,
+        limit_config=LimitConfig(reveal=reveal),
     )
     report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))
     if as_json:
@@ -166,4 +185,9 @@ def diagnose_cmd(
             f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}{bounds}",
             highlight=False,
         )
+    if report.get("limits"):
+        for c in report["candidates"]:
+            err_console.print(
+                "  " + limit_line(c, report["named_effect"], report["limits"]["clip_seconds"]), highlight=False
+            )
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)

@@ -7,7 +7,9 @@ are. :func:`measure_gap` therefore re-simulates the best θ under ``K`` fresh se
 re-simulations to the target is the **gap**, the median distance among them the **noise
 floor** (what a perfect model would leave). The same seeds are used for every model of a
 diagnosis, so gaps are compared pairwise. Measurements are cached as JSON in the stage's
-run directory, so an interrupted diagnosis does not redo them.
+run directory, so an interrupted diagnosis does not redo them; the re-simulations'
+embeddings are kept beside it (NPZ), for the detection limits' ladder to reuse
+(:mod:`physinfer.diagnose.limits`).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_save_npz, atomic_write_json
 from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
@@ -28,12 +30,17 @@ if TYPE_CHECKING:
 GAP_FILE = "gap.json"
 
 
-def _from_summary(params: Mapping[str, float], summary: Mapping[str, Any]) -> NoiseFloor:
-    """Rebuild a :class:`NoiseFloor` (without embeddings) from its JSON summary."""
+def _from_summary(params: Mapping[str, float], summary: Mapping[str, Any], embeddings: Path | None) -> NoiseFloor:
+    """Rebuild a :class:`NoiseFloor` from its JSON summary (and its embeddings, when stored)."""
+    stored = np.zeros((0, 0), dtype=np.float32)
+    if embeddings is not None and embeddings.is_file():
+        with np.load(embeddings, allow_pickle=False) as data:
+            if [int(s) for s in data["seeds"]] == [int(s) for s in summary["seeds"]]:
+                stored = np.asarray(data["embeddings"])
     return NoiseFloor(
         params={k: float(v) for k, v in params.items()},
         seeds=[int(s) for s in summary["seeds"]],
-        embeddings=np.zeros((0, 0), dtype=np.float32),
+        embeddings=stored,
         pairwise=[float(d) for d in summary["pairwise"]],
         to_target=None if summary["to_target"] is None else [float(d) for d in summary["to_target"]],
         n_failed=int(summary.get("n_failed", 0)),
@@ -70,12 +77,14 @@ def measure_gap(
     """
     key = {"params": {k: float(v) for k, v in params.items()}, "seeds": [int(s) for s in seeds]}
     path = None if cache_dir is None else Path(cache_dir) / cache_name
+    npz = None if path is None else path.with_suffix(".npz")
     if path is not None and path.is_file():
         stored = json.loads(path.read_text())
         if stored.get("key") == key:
-            return _from_summary(params, stored["summary"])
+            return _from_summary(params, stored["summary"], npz)
     floor = measure_noise_floor(pipeline, params, render_params, seeds=seeds, target_embedding=target_embedding)
-    if path is not None:
+    if path is not None and npz is not None:
+        atomic_save_npz(npz, embeddings=floor.embeddings, seeds=np.asarray(floor.seeds, dtype=np.int64))
         atomic_write_json(path, {"key": key, "summary": floor.summary()})
     return floor
 

@@ -11,6 +11,8 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
                          more trials from its best θ, as ``control/`` continues the baseline
     control/             the baseline refined ``effect_steps`` more trials from its best θ
     effect-<name>/       the baseline with <name> switched in, the same budget and warm start
+    limits.json          each candidate's detection limit at the best baseline fit
+                         (:mod:`physinfer.diagnose.limits`; skipped with ``limits=False``)
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
 
 Step 2's gap is each model's best θ re-simulated under the same ``K`` fresh seeds (see
@@ -39,6 +41,7 @@ from physinfer.diagnose.decide import (
     self_consistency_gap,
 )
 from physinfer.diagnose.gap import gap_numbers, measure_gap
+from physinfer.diagnose.limits import LimitConfig
 from physinfer.diagnose.localise import LocaliseConfig, localise
 from physinfer.diagnose.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
@@ -98,6 +101,9 @@ class DiagnoseSettings:
         rule: Decision thresholds.
         localise: Localisation settings.
         videos: Write the side-by-side video.
+        limits: Estimate each candidate's detection limit (``detectable_from``).
+        limit_config: The detection-limit ladder's settings (``reveal``: also try another
+            view and a longer clip).
     """
 
     plugin: str
@@ -127,6 +133,8 @@ class DiagnoseSettings:
     rule: DecisionRule = field(default_factory=DecisionRule)
     localise: LocaliseConfig = field(default_factory=LocaliseConfig)
     videos: bool = True
+    limits: bool = True
+    limit_config: LimitConfig = field(default_factory=LimitConfig)
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad setting."""
@@ -447,7 +455,7 @@ def _diagnose(
         )
 
     # 1. The baseline.
-    say(f"[1/5] refining the baseline ({steps} trials)")
+    say(f"[1/6] refining the baseline ({steps} trials)")
     baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
     gap0 = gap_of(base, baseline.best_params, "baseline")
 
@@ -456,7 +464,7 @@ def _diagnose(
     if settings.calibrate:
         per_run = f"{steps} + {effect_steps}" if settings.calibration_control else f"{steps}"
         say(
-            f"[2/5] self-consistency: refining the baseline against its own fit "
+            f"[2/6] self-consistency: refining the baseline against its own fit "
             f"({settings.calibration_runs} × {per_run} trials)"
         )
         calibration = run_calibration(
@@ -467,14 +475,14 @@ def _diagnose(
     scale = null_scale(gap0.floor, gap0.floor_q95, self_gap)
 
     # 4. Equal-budget control and one augmented model per effect, all warm-started.
-    say(f"[3/5] control: the baseline refined {effect_steps} more trials from its fit")
+    say(f"[3/6] control: the baseline refined {effect_steps} more trials from its fit")
     control = run_stage(
         "control", base, target, steps=effect_steps, start=baseline.best_params, target_label=target_label, **common
     )
     base_space = base.simulator.parameter_space
     stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
     for name, effect in effect_objs.items():
-        say(f"[4/5] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
+        say(f"[4/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
         pipeline = augmented_pipeline(base, [effect], settings.duration_s, fixed_by_user(base, settings.fixed))
         result = run_stage(
             f"effect-{name}",
@@ -542,14 +550,93 @@ def _diagnose(
         say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
     named = name_effect(candidates, verdict["misspecified"])
     after = next((s for s in stages if s.label == named), before)
-    say("[5/5] " + (f"named: {named}" if named else "no effect explains the gap") + "; localising and writing outputs")
+    say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
+    limits = None
+    if settings.limits:
+        n_sims = _diagnosis_simulations(settings, [baseline, control, *(s.result for s in stages[1:])], calibration,
+                                        n_gaps=2 + len(calibration) * (2 if settings.calibration_control else 1)
+                                        + 2 * len(effect_objs))
+        limits = _limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
+        for cand in candidates:
+            lim = limits["effects"][cand["effect"]]
+            cand["detectable_from"] = lim["detectable_from"]
+            cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+    say("[6/6] localising and writing outputs")
 
     report = _outputs(
         settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
         baseline,
     )
+    report["limits"] = None if limits is None else {k: v for k, v in limits.items() if k != "effects"}
     base.renderer.close()
     return report
+
+
+def _diagnosis_simulations(settings: DiagnoseSettings, results: Sequence[RefineResult],
+                           calibration: Sequence[Mapping[str, Any]], n_gaps: int) -> int:
+    """Simulations a diagnosis costs: trials, selection re-simulations, gap measurements (the ladder's budget)."""
+    stages = len(results) + len(calibration) * (2 if settings.calibration_control else 1)
+    per_stage_trials = sum(r.n_trials for r in results) / max(len(results), 1)
+    steps = settings.steps or per_stage_trials
+    effect_steps = settings.effect_steps or steps
+    calibration_trials = len(calibration) * (steps + (effect_steps if settings.calibration_control else 0))
+    select = settings.select_top * settings.select_seeds * stages
+    return int(sum(r.n_trials for r in results) + calibration_trials + select + n_gaps * settings.floor_samples)
+
+
+def _limits(
+    registry: Registry,
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    target: Target,
+    before: Stage,
+    effect_objs: Mapping[str, Any],
+    scale: float,
+    n_sims: int,
+    say: Log,
+) -> dict[str, Any]:
+    """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``."""
+    import json
+
+    from physinfer.diagnose.limits import LimitInputs, detection_limits
+
+    theta = before.best_params
+    fixed = fixed_by_user(base, settings.fixed)
+    key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": float(scale),
+           "effects": sorted(effect_objs), "config": settings.limit_config.to_dict(), "seed": settings.seed}
+    path = settings.out / "limits.json"
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key:
+            return stored["limits"]
+    embeddings = np.asarray(before.gap.embeddings)
+    if embeddings.ndim != 2 or len(embeddings) < 2:  # a gap measured before embeddings were kept
+        seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
+        embeddings = measure_gap(base, theta, target.render_params, np.zeros(1), seeds=seeds).embeddings
+    augmented = {name: augmented_pipeline(base, [effect], settings.duration_s, fixed)
+                 for name, effect in effect_objs.items()}
+
+    def make_longer(seconds: float) -> tuple[Any, dict[str, Any], Any]:
+        from physinfer.session import build_pipeline
+
+        frames = settings.embedder_frames or getattr(base.embedder, "n_frames", None)
+        longer = build_pipeline(
+            registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
+            duration_s=2 * seconds, embedder_frames=None if frames is None else 2 * int(frames), fixed=settings.fixed,
+        )  # fmt: skip
+        sims = {name: augmented_pipeline(longer, [e], 2 * seconds, fixed).simulator for name, e in effect_objs.items()}
+        return longer.simulator, sims, longer.embedder
+
+    say(f"      detection limits: a ladder of {len(settings.limit_config.fractions)} strengths per effect "
+        "at the best baseline fit")
+    inputs = LimitInputs(
+        base=base, augmented=augmented, theta=theta, base_embeddings=embeddings, render_params=target.render_params,
+        scale=scale, rule=settings.rule, floor_samples=settings.floor_samples, seed=settings.seed,
+        diagnosis_simulations=n_sims, make_longer=make_longer,
+    )
+    limits = detection_limits(inputs, settings.limit_config, log=say)
+    atomic_write_json(path, {"key": key, "limits": limits})
+    return json.loads(path.read_text())["limits"]  # as a resumed diagnosis reads it (NaN as null)
 
 
 def _outputs(
