@@ -3,7 +3,8 @@
 Registered as a command by physinfer's built-in plugin; the work is done by
 :func:`physinfer.prepare.prepare_clip`. Writes the prepared clip (``--out``), a JSON
 beside it (``prepared.json``: the box, the framing square, the shake, the frame rates,
-the frames kept) and an overlay PNG (``prepared_overlay.png``) to check the box by eye.
+the frames kept, and the render parameters ζ estimated from the prepared clip by
+:func:`physinfer.render_estimate.estimate_render_params` unless ``--no-render-estimate``) and an overlay PNG (``prepared_overlay.png``) to check the box by eye.
 """
 
 from __future__ import annotations
@@ -64,6 +65,13 @@ def prepare_cmd(
     no_stabilise: Annotated[
         bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
     ] = False,
+    no_render_estimate: Annotated[
+        bool,
+        typer.Option(
+            "--no-render-estimate",
+            help="Do not estimate the camera's render parameters (ζ) from the prepared clip.",
+        ),
+    ] = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
@@ -99,11 +107,18 @@ def prepare_cmd(
         )
     write_video(paths["video"], result.clip)
     save_overlay(result, paths["overlay"])
+    estimate = None
+    if not no_render_estimate:
+        from physinfer.render_estimate import estimate_render_params
+
+        with err_console.status("estimating the camera's render parameters"):
+            estimate = estimate_render_params(phenomenon, result.clip, embedder=embedder_obj)
     summary: dict[str, Any] = {
         "plugin": plugin,
         "target": str(target),
         "embedder": name,
         **result.to_dict(),
+        "render_estimate": estimate,
         "video": str(paths["video"]),
         "overlay": str(paths["overlay"]),
         "json": str(paths["json"]),
@@ -119,12 +134,22 @@ def prepare_cmd(
         f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {settings.size}×{settings.size}",
         highlight=False,
     )
+    if estimate is not None:
+        err_console.print(render_estimate_line(estimate), highlight=False)
     for warning in result.warnings:
         err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
     err_console.print(
         f"wrote {paths['video']}, {paths['json']}, {paths['overlay']} (check the box)",
         highlight=False,
     )
+
+
+def render_estimate_line(estimate: dict[str, Any]) -> str:
+    """One line: the estimated ζ with ± its standard error, as ``--render-set`` would take it."""
+    if not estimate.get("values"):
+        return f"render parameters not estimated: {estimate.get('note', '')}"
+    parts = [f"{k}={v:g} (±{estimate['sd'][k]:.2g})" for k, v in estimate["values"].items()]
+    return "estimated render parameters (pass with --render-set): " + ", ".join(parts)
 
 
 def output_paths(out: Path, target: Path) -> dict[str, Path]:
