@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.parameters import ParameterSpace
+from physinfer.scene import SceneSetting
 from physinfer.types import Clip, Trajectory
 
 Params = Mapping[str, float]
@@ -263,6 +264,12 @@ class Phenomenon:
             region that moves in a video to the square ``(x, y, side, side)`` the
             renderer frames at its default ζ (``physinfer prepare``); ``None``:
             :func:`physinfer.prepare.default_framing`, the box's centre with a margin.
+        scene_settings: Known, non-inferred settings of the scene (a flag's size and
+            pinning), :class:`physinfer.scene.SceneSetting` records the user sets with
+            ``--scene-set NAME=VALUE``. A phenomenon that declares any must accept the
+            keyword ``scene`` in ``make_simulator`` (and may in ``make_renderer``): the
+            complete, validated settings by name, passed only when the user gave some
+            (see :mod:`physinfer.scene`). Empty: ``--scene-set`` is refused.
     """
 
     name: str
@@ -279,3 +286,4 @@ class Phenomenon:
     framing: (
         Callable[[tuple[float, float, float, float]], tuple[float, float, float, float]] | None
     ) = None
+    scene_settings: tuple[SceneSetting, ...] = ()

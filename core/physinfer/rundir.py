@@ -20,8 +20,8 @@ Nothing outside ``DIR`` is written, and nothing in it that the run did not creat
 ``trials.jsonl`` back; a corrupt log is a clear error and nothing is overwritten.
 
 Everything a resumed run depends on is its identity (:data:`IDENTITY`): plugin, optimizer,
-seed, effects, fixed values, parameter space, embedder and its weights, clip length, ζ, the
-target video, the warm start, and a fingerprint of the target's embedding (which changes
+seed, effects, fixed values, parameter space, embedder and its weights, clip length, the scene
+(``--scene-set``, recorded only when given), ζ, the target video, the warm start, and a fingerprint of the target's embedding (which changes
 with the embedder's weights even when they are the plugin's shipped ones). A resume that
 differs in any of them is refused with a short list of what differs, in the CLI's words
 (``--render-set size: run 128, now 64``).
@@ -78,6 +78,7 @@ IDENTITY = {
     "weights_sha256": "--weights",
     "embedder_frames": "--embedder-frames",
     "duration_s": "--duration",
+    "scene": "--scene-set",
     "seeds_per_trial": "--seeds-per-trial",
     "render_params": "--render-set",
     "target_sha256": "--target",
@@ -335,7 +336,7 @@ def _same(key: str, old: Any, new: Any) -> bool:
 def _describe(key: str, old: Any, new: Any) -> list[str]:
     """``LABEL: run OLD, now NEW`` phrases for one identity entry that differs."""
     label = IDENTITY[key]
-    if key in ("fixed", "render_params"):
+    if key in ("fixed", "render_params", "scene"):
         old, new = old or {}, new or {}
         unset = "not fixed" if key == "fixed" else "not set"
         return [

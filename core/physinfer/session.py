@@ -24,6 +24,7 @@ from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinemen
 from physinfer.registry import Registry, accepts_keyword
 from physinfer.roles import Target
 from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord
+from physinfer.scene import bind_scene, resolve_scene, scene_of
 
 
 def build_pipeline(
@@ -37,6 +38,7 @@ def build_pipeline(
     fixed: Sequence[str] = (),
     duration_s: float | None = None,
     embedder_frames: int | None = None,
+    scene_set: Mapping[str, Any] | None = None,
 ) -> Pipeline:
     """Build simulator (with effects), renderer and embedder of a phenomenon.
 
@@ -53,10 +55,14 @@ def build_pipeline(
             for phenomena whose ``make_simulator`` takes ``duration_s``.
         embedder_frames: Frames the embedder reads (``None``: its default); for embedders
             whose factory takes ``n_frames`` (parameter-free ones; an SDN's are in its weights).
+        scene_set: Known scene settings by name (``--scene-set``, strings or values; see
+            :mod:`physinfer.scene`); ``None``: the phenomenon's default scene. The pipeline's
+            ``phenomenon`` is bound to the validated scene (:func:`physinfer.scene.scene_of`).
 
     Raises:
         UserInputError: a duration the phenomenon cannot record, frames the embedder
-            cannot be told, a device this machine lacks, or an effect given twice.
+            cannot be told, a device this machine lacks, an effect given twice, or a
+            scene setting that is unknown or out of range.
     """
     from physinfer.devices import check_device
     from physinfer.fixed import FixedParameters, resolve_fixed
@@ -64,6 +70,8 @@ def build_pipeline(
     device = check_device(device)  # refused here, not ignored by an embedder that needs none
     refuse_repeats(effects, "--effect")
     phenomenon = registry.phenomenon(plugin)
+    if scene_set:
+        phenomenon = bind_scene(phenomenon, resolve_scene(phenomenon, scene_set))
     effect_objs = [registry.effect(name, phenomenon=phenomenon.name) for name in effects]
     simulator = make_simulator(phenomenon, effect_objs, duration_s)
     if fixed:
@@ -273,6 +281,7 @@ def refine(
     embedder_frames: int | None = None,
     posterior: Path | None = None,
     use_posterior: bool = True,
+    scene_set: Mapping[str, Any] | None = None,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
@@ -288,7 +297,9 @@ def refine(
     given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
     (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
     step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
-    ``duration_s`` and ``embedder_frames``: see :func:`build_pipeline`.
+    ``duration_s``, ``embedder_frames`` and ``scene_set``: see :func:`build_pipeline`; a
+    scene is recorded in ``run.json`` (a resume key) and ``result.json`` (``scene``), and a
+    posterior estimator trained under another scene is not used (``posterior_note`` says so).
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     if resume and overwrite:
@@ -309,8 +320,9 @@ def refine(
             fixed = [f"{name}={value!r}" for name, value in model_file.extra.get("fixed", {}).items()]
     pipeline = build_pipeline(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
-        duration_s=duration_s, embedder_frames=embedder_frames,
+        duration_s=duration_s, embedder_frames=embedder_frames, scene_set=scene_set,
     )  # fmt: skip
+    scene = scene_of(pipeline.phenomenon)
     fixed_values = fixed_by_user(pipeline, fixed)
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(
@@ -333,7 +345,7 @@ def refine(
 
         amortized, amortized_note = posterior_for_refinement(
             registry, plugin=plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
-            posterior=posterior, device=device, seed=seed,
+            posterior=posterior, device=device, seed=seed, scene=scene,
         )  # fmt: skip
     if resume:
         stored = run_dir.load_run_info()
@@ -355,6 +367,8 @@ def refine(
         "batch_size": batch_size,  # informative: a resumed run may use another q
     }
     run_info.update(optional_settings(fixed_values, duration_s, embedder_frames))
+    if scene is not None:  # recorded only when given: runs from before scenes stay resumable
+        run_info["scene"] = scene
     run_info.update(resume_identity(target, weights))
     factory = registry.get("optimizers", optimizer).load()
     start_x, post_start = None, None
@@ -377,9 +391,9 @@ def refine(
     run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
     if post_start is not None:
         run_info["search_box"] = [[float(v) for v in ends] for ends in post_start.box]
-    from physinfer.trial_workers import PipelineSpec, trial_workers
+    from physinfer.trial_workers import PipelineSpec, scene_items, trial_workers
 
-    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s)
+    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s, scene=scene_items(scene))
     with exclusive_directory(out):  # one writer: a second refine of this --out is refused
         with (
             trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
@@ -392,6 +406,8 @@ def refine(
 
         if fixed_values:
             result.extra["fixed"] = fixed_values
+        if scene is not None:
+            result.extra["scene"] = scene
         if executor is not None:
             result.extra["executor"] = executor
         if amortized is not None:

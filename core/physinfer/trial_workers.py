@@ -36,6 +36,8 @@ class PipelineSpec:
         fixed: ``NAME=VALUE`` items held fixed (``refine --fix``).
         duration_s: Seconds each simulation records (``refine --duration``; ``None``:
             the phenomenon's default).
+        scene: The scene's settings as ``(name, value)`` pairs (``refine --scene-set``,
+            :func:`scene_items`; ``None``: the phenomenon's default scene).
         threads: Thread cap per worker process for numerical libraries and llvmpipe
             (``None``: leave the process as it is).
     """
@@ -44,7 +46,13 @@ class PipelineSpec:
     effects: tuple[str, ...] = ()
     fixed: tuple[str, ...] = ()
     duration_s: float | None = None
+    scene: tuple[tuple[str, Any], ...] | None = None
     threads: int | None = 1
+
+
+def scene_items(scene: Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...] | None:
+    """A scene as hashable ``(name, value)`` pairs for :class:`PipelineSpec` (``None`` stays)."""
+    return None if scene is None else tuple(sorted(scene.items()))
 
 
 def worker_pipeline(spec: PipelineSpec) -> Any:
@@ -59,8 +67,9 @@ def worker_pipeline(spec: PipelineSpec) -> Any:
             limit_threads(spec.threads)
         registry, _ = load_registry()
         cache[spec] = build_pipeline(
-            registry, spec.plugin, effects=spec.effects, embedder="", fixed=spec.fixed, duration_s=spec.duration_s
-        )
+            registry, spec.plugin, effects=spec.effects, embedder="", fixed=spec.fixed, duration_s=spec.duration_s,
+            scene_set=dict(spec.scene) if spec.scene is not None else None,
+        )  # fmt: skip
     return cache[spec]
 
 

@@ -73,6 +73,15 @@ EmbedderFramesOpt = Annotated[
         "with --duration 8). An SDN's frames are set by its weights.",
     ),
 ]
+SceneSetOpt = Annotated[
+    list[str],
+    typer.Option(
+        "--scene-set",
+        help="A known setting of the scene, not inferred: NAME=VALUE (repeatable). The flag: flag_length, "
+        "flag_height, pole_height (m), pinning=hoist|corners; the hanging cloth: cloth_width, "
+        "cloth_height (m), fan=W1|W2|W3. A wrong name lists the plugin's.",
+    ),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(
@@ -273,6 +282,7 @@ def simulate_cmd(
     ] = [],  # noqa: B006
     seed: SeedOpt = 0,
     duration: DurationOpt = None,
+    scene_set: SceneSetOpt = [],  # noqa: B006
     out: Annotated[Path | None, typer.Option("--out", help="Video to write (.mp4 or .gif).")] = None,
     trajectory_out: Annotated[
         Path | None, typer.Option("--trajectory-out", help="Trajectory NPZ to write.")
@@ -291,7 +301,11 @@ def simulate_cmd(
         if path is not None and path.is_dir():
             raise UserInputError(f"{option} {path} is a directory; give a file name")
     registry, _ = registry_and_infos()
-    pipeline = build_pipeline(registry, plugin, effects=effect, embedder="", duration_s=duration)
+    from physinfer.scene import parse_scene_set, scene_of
+
+    pipeline = build_pipeline(
+        registry, plugin, effects=effect, embedder="", duration_s=duration, scene_set=parse_scene_set(scene_set)
+    )
     with naming_effects(registry, plugin, effect, "--set"):  # an effect's parameter: name the effect
         params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
     # Check ζ before simulating: a typo should not cost a simulation.
@@ -302,6 +316,8 @@ def simulate_cmd(
     trajectory = pipeline.simulator.simulate(params, seed=seed)
     sim_s = time.perf_counter() - t0
     result: dict[str, Any] = {"plugin": plugin, "params": params, "effects": effect, "seed": seed}
+    if scene_of(pipeline.phenomenon) is not None:
+        result["scene"] = scene_of(pipeline.phenomenon)
     result.update(simulate_s=sim_s, n_frames=trajectory.n_frames, fps=trajectory.fps)
     if trajectory_out is not None:
         trajectory.save(trajectory_out)
@@ -393,6 +409,7 @@ def refine_cmd(
     ] = None,
     duration: DurationOpt = None,
     embedder_frames: EmbedderFramesOpt = None,
+    scene_set: SceneSetOpt = [],  # noqa: B006
     posterior: Annotated[
         Path | None,
         typer.Option(
@@ -408,6 +425,7 @@ def refine_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
+    from physinfer.scene import parse_scene_set
     from physinfer.session import refine
 
     if resume and out is None:
@@ -447,6 +465,7 @@ def refine_cmd(
         embedder_frames=embedder_frames,
         posterior=posterior,
         use_posterior=not no_posterior,
+        scene_set=parse_scene_set(scene_set),
     )
     summary = result.summary()
     if as_json:
@@ -462,6 +481,10 @@ def refine_result_lines(result: Any) -> list[str]:
     best fit is where the search stopped, and a bound it stopped on says nothing either);
     correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
+    if result.extra.get("scene"):
+        from physinfer.scene import scene_text
+
+        lines.append(f"  scene: {scene_text(result.extra['scene'])}")
     marginals = result.extra.get("posterior") or {}
     hidden = [n for n in result.best_params if marginals.get(n, {}).get("label") == "not identified"]
     at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from physinfer.cli.app import emit_json, handle_errors
+from physinfer.cli.app import SceneSetOpt, emit_json, handle_errors
 from physinfer.errors import UserInputError
 
 if TYPE_CHECKING:
@@ -66,6 +66,7 @@ def generate_cmd(
         str | None, typer.Option("--scheduler", help="Dask scheduler address; its workers must share --out.")
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Dataset seed: same seed, same data.")] = 0,
+    scene_set: SceneSetOpt = [],  # noqa: B006
     verify: Annotated[
         bool, typer.Option("--verify/--no-verify", help="On resume, check every checksum (reads all data).")
     ] = True,
@@ -87,6 +88,7 @@ def generate_cmd(
         scheduler=scheduler,
         seed=seed,
         verify=verify,
+        scene_set=scene_set,
     )
     summary = result.summary()
     _stderr(_summary_line(result))
@@ -110,12 +112,16 @@ def _generate(
     scheduler: str | None,
     seed: int,
     verify: bool,
+    scene_set: list[str],
 ) -> GenerateResult:
     from physinfer.datasets import generate_dataset, generator_for, parse_split_counts
     from physinfer.plugins import load_registry
+    from physinfer.scene import bind_scene, parse_scene_set, resolve_scene, scene_text
 
     registry, _infos = load_registry()
-    generator = generator_for(registry.phenomenon(plugin))
+    phenomenon = registry.phenomenon(plugin)
+    scene = resolve_scene(phenomenon, parse_scene_set(scene_set))
+    generator = generator_for(bind_scene(phenomenon, scene))
     chosen = _choose_preset(generator.presets(), preset_name, plugin)
     chosen = chosen.with_overrides(
         sims=parse_split_counts(sims, "--sims") if sims is not None else None,
@@ -132,7 +138,8 @@ def _generate(
     where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
     _stderr(
         f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
-        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing} "
+        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing}"
+        f"{f', scene {scene_text(scene)}' if scene else ''} "
         f"→ {out} ({where})"
     )
     with _RichProgress() as progress:

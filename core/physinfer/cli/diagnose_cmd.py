@@ -18,6 +18,7 @@ from physinfer.cli.app import (
     FixOpt,
     JsonOpt,
     PluginOpt,
+    SceneSetOpt,
     SeedOpt,
     SelectSeedsOpt,
     SelectTopOpt,
@@ -118,6 +119,7 @@ def diagnose_cmd(
             "(chaotic phenomena; re-renders and re-simulates the ladder).",
         ),
     ] = False,
+    scene_set: SceneSetOpt = [],  # noqa: B006
     as_json: JsonOpt = False,
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
@@ -131,6 +133,10 @@ def diagnose_cmd(
     if out is None:
         out = Path("runs") / f"diagnose-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
     registry, _ = registry_and_infos()
+    if scene_set:  # every model of the diagnosis is built from the scene-bound phenomenon
+        from physinfer.scene import SceneRegistry, parse_scene_set
+
+        registry = SceneRegistry(registry, plugin, parse_scene_set(scene_set))
     settings = DiagnoseSettings(
         plugin=plugin,
         out=out,
@@ -166,6 +172,8 @@ def diagnose_cmd(
         limit_config=LimitConfig(reveal=reveal),
     )
     report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))
+    if scene_set:
+        report["scene"] = registry.scene
     if as_json:
         emit_json(report)
         return

@@ -17,6 +17,7 @@ import typer
 from physinfer.cli.app import (
     JsonOpt,
     PluginOpt,
+    SceneSetOpt,
     emit_json,
     err_console,
     handle_errors,
@@ -121,17 +122,19 @@ def infer_cmd(
         Path | None, typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png.")
     ] = None,
     device: DeviceOpt = None,
+    scene_set: SceneSetOpt = [],  # noqa: B006
     as_json: JsonOpt = False,
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
     from physinfer.posterior.workflow import infer, summary_lines
+    from physinfer.scene import parse_scene_set
 
     if out is None:
         out = Path("runs") / f"infer-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
     registry, _ = registry_and_infos()
     report = infer(
         registry, plugin=plugin, out=out, target_path=target, posterior=posterior, fps=fps, truth=truth,
-        n_samples=samples, seed=seed, device=device,
+        n_samples=samples, seed=seed, device=device, scene_set=parse_scene_set(scene_set),
     )  # fmt: skip
     if as_json:
         emit_json(report.to_dict())

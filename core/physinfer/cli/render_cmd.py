@@ -18,6 +18,7 @@ import typer
 from physinfer.cli.app import (
     JsonOpt,
     PluginOpt,
+    SceneSetOpt,
     emit_json,
     err_console,
     handle_errors,
@@ -48,9 +49,14 @@ def render_cmd(
     render_set: Annotated[
         list[str], typer.Option("--render-set", help="Render setting NAME=VALUE (repeatable).")
     ] = [],  # noqa: B006
+    scene_set: SceneSetOpt = [],  # noqa: B006
     as_json: JsonOpt = False,
 ) -> None:
-    """Render a trajectory file (physinfer NPZ or a folder of OBJ meshes) to a video."""
+    """Render a trajectory file (physinfer NPZ or a folder of OBJ meshes) to a video.
+
+    The renderer frames the sheet from the trajectory's own size; of the scene settings, the
+    flag's ``pole_height`` draws the pole of a trajectory that carries none (OBJ meshes).
+    """
     from physinfer.cli.app import registry_and_infos
     from physinfer.meshio import load_trajectory
     from physinfer.video import write_video
@@ -59,8 +65,12 @@ def render_cmd(
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
     if out.is_dir():
         raise UserInputError(f"--out {out} is a directory; give a file name")
+    from physinfer.scene import bind_scene, parse_scene_set, resolve_scene
+
     registry, _ = registry_and_infos()
-    renderer = registry.phenomenon(plugin).make_renderer()
+    phenomenon = registry.phenomenon(plugin)
+    scene = resolve_scene(phenomenon, parse_scene_set(scene_set))
+    renderer = bind_scene(phenomenon, scene).make_renderer()
     # ζ and the file are checked before any rendering, as simulate checks ζ before simulating.
     zeta = renderer.check_render_params(
         {**renderer.default_render_params, **parse_render_set(render_set)}
@@ -83,6 +93,7 @@ def render_cmd(
         "fps": loaded.fps,
         "uv": "uv" in loaded.extras,
         "render_params": zeta,
+        **({"scene": scene} if scene is not None else {}),
         "render_s": render_s,
         "video": str(out),
     }

@@ -228,22 +228,26 @@ class GenerateResult:
 
 
 def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int) -> dict[str, Any]:
-    """What determines a dataset's content; a resumed run must match it exactly."""
+    """What determines a dataset's content; a resumed run must match it exactly.
+
+    ``scene`` (``dataset generate --scene-set``) is recorded only when one was given, so
+    datasets made before scenes existed still resume.
+    """
+    from physinfer.scene import scene_of
+
     described = preset.to_dict()
     described.pop("description")
-    return json.loads(
-        json.dumps(
-            to_jsonable(
-                {
-                    "phenomenon": generator.phenomenon,
-                    "generator": f"{type(generator).__module__}.{type(generator).__qualname__}",
-                    "seed": seed,
-                    "preset": described,
-                    "parameters": generator.parameter_space.to_dict(),
-                }
-            )
-        )
-    )
+    config: dict[str, Any] = {
+        "phenomenon": generator.phenomenon,
+        "generator": f"{type(generator).__module__}.{type(generator).__qualname__}",
+        "seed": seed,
+        "preset": described,
+        "parameters": generator.parameter_space.to_dict(),
+    }
+    scene = scene_of(getattr(generator, "record", None))
+    if scene is not None:
+        config["scene"] = scene
+    return json.loads(json.dumps(to_jsonable(config)))
 
 
 def generate_dataset(

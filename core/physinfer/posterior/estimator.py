@@ -103,6 +103,9 @@ class EstimatorConfig:
         frames_option: ``--embedder-frames`` as given at training (``None``: the embedder's
             own), passed again when the embedder is rebuilt for inference.
         weights: ``--weights`` as given at training (``None``: the plugin's shipped ones).
+        scene: The scene settings of the training dataset (``dataset generate
+            --scene-set``; ``None``: the phenomenon's default scene). A target of another
+            scene is not given this estimator's intervals (:meth:`PosteriorEstimator.check_scene`).
     """
 
     plugin: str
@@ -122,6 +125,7 @@ class EstimatorConfig:
     training: dict[str, Any] = field(default_factory=dict)
     frames_option: int | None = None
     weights: str | None = None
+    scene: dict[str, Any] | None = None
 
     @property
     def parameter_space(self) -> ParameterSpace:
@@ -297,6 +301,27 @@ class PosteriorEstimator:
                 f"the posterior estimator {where}was trained on another parameter space ({diff}); "
                 "train one on a dataset of this model (same effects, nothing --fix'ed)"
             )
+
+    def check_scene(self, phenomenon: Any, scene: Mapping[str, Any] | None, path: str | Path = "") -> None:
+        """Refuse a target of another scene than the training clips' (``None``: the default).
+
+        Its embeddings were learnt from clips of one scene only: a flag of another size flaps
+        at other frequencies in the same wind, so the estimator's intervals would be confident
+        and wrong (docs/real-videos.md, "Flag size and pinning").
+
+        Raises:
+            UserInputError: naming both scenes and how to get a matching estimator.
+        """
+        from physinfer.scene import same_scene, scene_text
+
+        if same_scene(phenomenon, self.config.scene, scene):
+            return
+        where = f"{path} " if path else ""
+        trained, given = (scene_text(s) if not s else f"the scene {scene_text(s)}" for s in (self.config.scene, scene))
+        raise UserInputError(
+            f"the posterior estimator {where}was trained on clips of {trained}, not of {given}; train one on a dataset of this scene (`physinfer dataset generate "
+            "--scene-set ...`, then `physinfer posterior train`)"
+        )
 
     def check_embedder(self, embedder: Any) -> None:
         """Refuse an embedder whose fingerprint differs from the one the estimator was trained with."""

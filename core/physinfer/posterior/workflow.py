@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -150,6 +150,9 @@ def train_posterior(
         on_epoch=lambda done, total, best: progress("training", done, total),
     )
     estimator.config.training.update(dataset=str(Path(data).resolve().name), split=split)
+    scene = dataset.info.get("config", {}).get("scene")
+    if scene is not None:  # the clips' scene: targets of another one get no intervals from it
+        estimator.config = replace(estimator.config, scene=dict(scene))
     t2 = time.perf_counter()
     estimator.save(out)
     pipeline.renderer.close()
@@ -258,6 +261,7 @@ class PosteriorReport:
     truth: dict[str, float] | None = None
     paths: dict[str, str] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+    scene: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON ``physinfer infer --json`` prints (and ``posterior.json``)."""
@@ -269,6 +273,8 @@ class PosteriorReport:
             "files": self.paths,
             "seconds": self.seconds,
         }
+        if self.scene is not None:
+            d["scene"] = self.scene
         if self.truth:
             d["truth"] = self.truth
             d["truth_in_ci90"] = {
@@ -312,13 +318,17 @@ def infer(
     n_samples: int = 5000,
     seed: int = 0,
     device: str | None = None,
+    scene_set: Mapping[str, Any] | None = None,
 ) -> PosteriorReport:
     """The posterior of one video (default: the plugin's embedded target), written to ``out``:
     ``posterior.json``, ``samples.npz`` and ``corner.png``.
 
+    ``scene_set``: the target's known scene settings (``--scene-set``); an estimator
+    trained on clips of another scene is refused.
+
     Raises:
-        UserInputError: a mismatched or damaged estimator, a target too short for it, an
-            unreadable video.
+        UserInputError: a mismatched or damaged estimator (another scene included), a
+            target too short for it, an unreadable video.
     """
     from physinfer.session import load_target
 
@@ -327,13 +337,19 @@ def infer(
     out = Path(out)
     check_output_dir(out)
     t_start = time.perf_counter()
+    from physinfer.scene import resolve_scene
+
+    phenomenon = registry.phenomenon(plugin)
+    scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
     estimator, path = load_estimator(registry, plugin, posterior, device)
+    estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
     target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set={})
     t_ready = time.perf_counter()
     report = posterior_of_clip(estimator, pipeline.embedder, target.clip, n_samples=n_samples, seed=seed)
     report.estimator = path
     report.truth = dict(target.truth) if target.truth else None
+    report.scene = scene
     report.seconds["start_up"] = t_ready - t_start
     write_report(report, estimator, out, title=target.description)
     pipeline.renderer.close()
@@ -513,14 +529,15 @@ def posterior_for_refinement(
     device: str | None = None,
     seed: int = 0,
     n_samples: int = 5000,
+    scene: Mapping[str, Any] | None = None,
 ) -> tuple[PosteriorReport | None, str | None]:
     """The amortized posterior of a refinement's target, or why there is none.
 
     With ``posterior`` given, any mismatch (another plugin, parameter space, embedder, a
     target shorter than its clips) is the user's error. Without it, the phenomenon's shipped
     estimator is used when it applies; when it does not (effects switched in, parameters
-    held by ``--fix``, a short target) the refinement goes on without it and the reason is
-    returned instead.
+    held by ``--fix``, a short target, another ``scene`` than its training clips') the
+    refinement goes on without it and the reason is returned instead.
 
     Returns:
         ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
@@ -532,6 +549,7 @@ def posterior_for_refinement(
     try:
         estimator, path = load_estimator(registry, plugin, posterior, device)
         estimator.check_for(plugin, parameter_space, path)
+        estimator.check_scene(phenomenon, scene, path)
         pipeline = estimator_embedder(registry, estimator, device)
         report = posterior_of_clip(estimator, pipeline.embedder, clip, n_samples=n_samples, seed=seed)
         pipeline.renderer.close()

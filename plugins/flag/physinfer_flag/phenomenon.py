@@ -11,11 +11,13 @@ from the centre of the space. The flag refines with the SDN and the weights ship
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cache
 from pathlib import Path
+from typing import Any
 
-from physinfer import Effect, Phenomenon, Target
+from physinfer import Effect, Phenomenon, Target, UserInputError
+from physinfer.scene import SceneSetting
 
 #: The shipped posterior estimator (``make posterior``).
 DEFAULT_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_default.safetensors"
@@ -33,29 +35,77 @@ def _default_truth() -> dict[str, float]:
     return truth
 
 
-def make_simulator(effects: Sequence[Effect] = (), *, duration_s: float | None = None):  # noqa: ANN201
-    """The flag simulator (a ``FlagSimulator``) at its default configuration.
+#: The flag's scene settings (``--scene-set``); defaults are the simulator's 1.5 m × 1 m flag
+#: held along its hoist on a 3 m pole. Sizes span pocket to large pole flags (0.9–3 m are
+#: common); the grid keeps its 5 cm cells, so cost grows with the area (docs/real-videos.md).
+SCENE_SETTINGS = (
+    SceneSetting("flag_length", "float", 1.5, (0.5, 4.0), unit="m",
+                 help="hoist-to-fly length of the flag, along the wind"),
+    SceneSetting("flag_height", "float", 1.0, (0.3, 3.0), unit="m", help="hoist length, along the pole"),
+    SceneSetting("pinning", "choice", "hoist", choices=("hoist", "corners"),
+                 help="hoist: the whole hoist edge on the pole; corners: only its two corners (ArcSim's flag)"),
+    SceneSetting("pole_height", "float", 3.0, (0.5, 30.0), unit="m",
+                 help="height of the pole's top above the ground; the flag's top is 5 cm below it"),
+)
+#: Grid spacing the scene's flag is meshed at: the default flag's 5 cm (docs/flag-physics.md).
+SCENE_SPACING = 0.05
+
+
+def scene_config(scene: Mapping[str, Any]) -> dict[str, Any]:
+    """``FlagSimConfig`` settings of a complete scene: size, pinning, pole and a grid of about
+    5 cm cells (31 × 21 nodes for the default flag, so the default scene is the default flag).
+
+    Raises:
+        UserInputError: a pole too short for the flag.
+    """
+    from physinfer_flag.simulator import POLE_CAP
+
+    length, height, pole = float(scene["flag_length"]), float(scene["flag_height"]), float(scene["pole_height"])
+    if pole < height + POLE_CAP:
+        raise UserInputError(
+            f"--scene-set pole_height={pole:g} is too short for flag_height={height:g}: the pole must reach "
+            f"at least flag_height + {POLE_CAP:g} m = {height + POLE_CAP:g} m"
+        )
+    return {
+        "width": length,
+        "height": height,
+        "grid_u": max(3, round(length / SCENE_SPACING) + 1),
+        "grid_v": max(3, round(height / SCENE_SPACING) + 1),
+        "pin_mode": "edge" if scene["pinning"] == "hoist" else "corners",
+        "pole_height": pole,
+    }
+
+
+def make_simulator(  # noqa: ANN201 - FlagSimulator
+    effects: Sequence[Effect] = (), *, duration_s: float | None = None, scene: Mapping[str, Any] | None = None
+):
+    """The flag simulator (a ``FlagSimulator``) at its default configuration, or a scene's.
 
     Args:
         effects: Effects switched into the wind.
         duration_s: Record this many seconds (rounded up to whole frames) instead of the
             default 60 frames; datasets of longer clips ask for it. A longer recording
             starts with the same frames as a shorter one of the same seed.
+        scene: Complete scene settings (:data:`SCENE_SETTINGS`, validated by
+            :func:`physinfer.scene.resolve_scene`); ``None``: the default flag.
     """
     from physinfer_flag.simulator import FlagSimConfig
     from physinfer_flag.simulator import make_simulator as make
 
-    if duration_s is None:
-        return make(effects)
-    fps = FlagSimConfig().fps
-    return make(effects, n_frames=max(1, math.ceil(duration_s * fps - 1e-9)))
+    config: dict[str, Any] = scene_config(scene) if scene is not None else {}
+    if duration_s is not None:
+        config["n_frames"] = max(1, math.ceil(duration_s * FlagSimConfig().fps - 1e-9))
+    return make(effects, **config)
 
 
-def make_renderer():  # noqa: ANN201 - FlagRenderer
-    """The pyrender flag renderer."""
+def make_renderer(scene: Mapping[str, Any] | None = None):  # noqa: ANN201 - FlagRenderer
+    """The pyrender flag renderer. It frames the flag from the trajectory's own size; a scene's
+    ``pole_height`` draws the pole of a trajectory that carries none (another simulator's)."""
     from physinfer_flag.render import FlagRenderer
 
-    return FlagRenderer()
+    if scene is None:
+        return FlagRenderer()
+    return FlagRenderer(pole_height=float(scene["pole_height"]))
 
 
 @cache
@@ -105,4 +155,5 @@ def make_phenomenon() -> Phenomenon:
         default_steps=40,
         default_posterior=str(DEFAULT_POSTERIOR),
         framing=framing,
+        scene_settings=SCENE_SETTINGS,
     )

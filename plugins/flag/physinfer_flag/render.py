@@ -211,8 +211,11 @@ class FlagGeometry:
         return self.hoist_top + np.array([0.5, 0.0, -_FRAME_CENTRE_DROP]) * self.length
 
 
-def measure_flag(trajectory: Trajectory) -> FlagGeometry:
+def measure_flag(trajectory: Trajectory, *, pole_height: float | None = None) -> FlagGeometry:
     """Measure the flag's rest size and placement from the first frame.
+
+    ``pole_height`` (metres above the ground, z = 0) places the pole of a trajectory that
+    carries no ``extras["pole"]``; without it such a pole reaches 3 fly lengths down.
 
     The size comes from edges that run mostly along u (for the length) or along v (for
     the height): the median of ``|p_i - p_j| / |Δu|`` and ``|p_i - p_j| / |Δv|``, which
@@ -227,7 +230,7 @@ def measure_flag(trajectory: Trajectory) -> FlagGeometry:
     length, height = _sheet_size(first, uv, trajectory.faces)
     hoist = np.flatnonzero(uv[:, 0] <= uv[:, 0].min() + 1e-3)
     hoist_top = first[hoist[np.argmax(uv[hoist, 1])]]
-    pole = _pole(trajectory, hoist_top, length)
+    pole = _pole(trajectory, hoist_top, length, pole_height)
     return FlagGeometry(length, height, hoist_top, pole, uv.astype(np.float32))
 
 
@@ -264,13 +267,16 @@ def texture_coordinates(trajectory: Trajectory) -> np.ndarray:
     return np.stack([(first[:, 0] - lo[0]) / span[0], (first[:, 2] - lo[2]) / span[2]], axis=1).astype(np.float32)
 
 
-def _pole(trajectory: Trajectory, hoist_top: np.ndarray, length: float) -> np.ndarray:
+def _pole(trajectory: Trajectory, hoist_top: np.ndarray, length: float, height: float | None = None) -> np.ndarray:
     if "pole" in trajectory.extras:
         pole = np.asarray(trajectory.extras["pole"], dtype=np.float64)
         if pole.shape != (2, 3):
             raise UserInputError(f"trajectory extras['pole'] must be (2, 3) bottom/top points, got {pole.shape}")
         return pole
     top = hoist_top + np.array([0.0, 0.0, 0.03 * length])
+    if height is not None:  # the scene's pole, from the ground; never below the flag's top
+        top[2] = max(float(height), top[2])
+        return np.stack([np.array([top[0], top[1], 0.0]), top])
     bottom = np.array([top[0], top[1], min(0.0, top[2] - 3.0 * length)])
     return np.stack([bottom, top])
 
@@ -324,11 +330,20 @@ class FlagRenderer(Renderer):
         background_dir: A folder of images added to the procedural backgrounds that
             :meth:`sample_render_params` draws from.
         textures: Flag designs :meth:`sample_render_params` draws from (default: all).
+        pole_height: Height of the pole's top above the ground for trajectories that carry
+            no pole of their own (``--scene-set pole_height``); ``None``: 3 fly lengths.
     """
 
     default_render_params: Mapping[str, Any] = MappingProxyType(FlagRenderParams().to_dict())
 
-    def __init__(self, *, background_dir: str | Path | None = None, textures: Sequence[str] | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        background_dir: str | Path | None = None,
+        textures: Sequence[str] | None = None,
+        pole_height: float | None = None,
+    ) -> None:
+        self.pole_height = pole_height
         self.background_dir = None if background_dir is None else Path(background_dir)
         self.backgrounds: tuple[str, ...] = BACKGROUND_NAMES + tuple(
             list_background_images(background_dir) if background_dir is not None else ()
@@ -356,7 +371,7 @@ class FlagRenderer(Renderer):
         params = FlagRenderParams.from_mapping(render_params)
         check_renderable(trajectory)
         height, width = params.size
-        geometry = measure_flag(trajectory)
+        geometry = measure_flag(trajectory, pole_height=self.pole_height)
         sheet = DoubleSidedSheet(trajectory.faces, trajectory.vertices.shape[1])
         scene, flag = self._build_scene(trajectory, geometry, sheet, params)
         background = background_image(params.background, (height, width))

@@ -8,10 +8,12 @@ one (30 frames at 25 fps, which the short default clips cover).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cache
+from typing import Any
 
 from physinfer import Effect, Phenomenon, Target
+from physinfer.scene import SceneSetting
 
 #: Ground truth of the embedded target: a fairly stiff, light fabric.
 DEFAULT_TRUTH = {"bending_multiplier": 12.0, "area_weight": 0.12}
@@ -19,11 +21,27 @@ DEFAULT_TRUTH = {"bending_multiplier": 12.0, "area_weight": 0.12}
 DEFAULT_SEED = 0
 
 
-def make_simulator(effects: Sequence[Effect] = ()):  # noqa: ANN201 - HangingClothSimulator
-    """The hanging-cloth simulator at its default configuration (fan W2)."""
+#: The hanging cloth's scene settings (``--scene-set``); defaults are the simulator's 0.6 m ×
+#: 0.8 m fabric in front of the fan at W2 (Bouman et al.'s videos show three fan levels).
+SCENE_SETTINGS = (
+    SceneSetting("cloth_width", "float", 0.6, (0.2, 2.0), unit="m", help="width of the fabric along the rod"),
+    SceneSetting("cloth_height", "float", 0.8, (0.2, 1.5), unit="m",
+                 help="hanging length of the fabric, rod to hem (the rod is 1.5 m high)"),
+    SceneSetting("fan", "choice", "W2", choices=("W1", "W2", "W3"), help="fan level of the video (W1 weakest)"),
+)
+
+
+def make_simulator(  # noqa: ANN201 - HangingClothSimulator
+    effects: Sequence[Effect] = (), *, scene: Mapping[str, Any] | None = None
+):
+    """The hanging-cloth simulator at its default configuration (fan W2), or a scene's
+    (complete settings of :data:`SCENE_SETTINGS`; the grid keeps its 4 cm spacing)."""
     from physinfer_hanging_cloth.simulator import make_simulator as make
 
-    return make(effects)
+    if scene is None:
+        return make(effects)
+    return make(effects, width=float(scene["cloth_width"]), height=float(scene["cloth_height"]),
+                fan_level=str(scene["fan"]))
 
 
 def make_renderer():  # noqa: ANN201 - HangingClothRenderer
@@ -55,4 +73,5 @@ def make_phenomenon() -> Phenomenon:
         default_embedder="spectral",
         default_target=default_target,
         default_steps=20,
+        scene_settings=SCENE_SETTINGS,
     )
