@@ -114,3 +114,37 @@ def test_a_clip_too_short_is_a_note_not_an_error(trajectory, sdn):
         renderer.close()
     est = estimate_render_params(make_phenomenon(), clip, embedder=sdn)
     assert est["values"] == {} and "needs 2.40 s" in est["note"]
+
+
+@pytest.mark.slow  # two CLI runs that each load torch and the SDN: about 45 s under load
+def test_prepare_writes_the_estimate_into_prepared_json(trajectory, tmp_path):
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from physinfer.types import Clip
+    from physinfer.video import write_video
+
+    renderer = make_renderer()
+    try:
+        flag = renderer.render(trajectory, {**ZETAS[0], "image_size": 160})
+    finally:
+        renderer.close()
+    frames = np.full((flag.n_frames, 360, 640, 3), 90, np.uint8)
+    frames[:, 100:260, 400:560] = flag.frames  # off-centre in a 640x360 frame
+    write_video(tmp_path / "wide.mp4", Clip(frames, flag.fps))
+    cmd = [str(Path(sys.executable).parent / "physinfer"), "prepare", "--plugin", "flag", "--target",
+           str(tmp_path / "wide.mp4"), "--out", str(tmp_path / "prepared.mp4"), "--json"]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    estimate = json.loads(proc.stdout)["render_estimate"]
+    assert json.loads((tmp_path / "prepared.json").read_text())["render_estimate"] == estimate
+    # prepare reframes to the renderer's automatic square: the framing read back is about 1.
+    assert abs(estimate["values"]["framing"] - 1.0) <= 2.5 * estimate["sd"]["framing"]
+    for name in ("camera_azimuth_deg", "camera_elevation_deg"):
+        assert abs(estimate["values"][name] - ZETAS[0][name]) <= 2.5 * estimate["sd"][name]
+    proc = subprocess.run(
+        [*cmd, "--no-render-estimate"], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0 and json.loads(proc.stdout)["render_estimate"] is None
