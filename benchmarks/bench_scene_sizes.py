@@ -53,7 +53,9 @@ def scene_of_size(size: tuple[float, float]) -> dict[str, float]:
 
 def clips(pipeline, params: dict[str, float], seeds: list[int]) -> list:
     zeta = pipeline.renderer.default_render_params
-    return [pipeline.renderer.render(pipeline.simulator.simulate(params, seed=s), zeta) for s in seeds]
+    return [
+        pipeline.renderer.render(pipeline.simulator.simulate(params, seed=s), zeta) for s in seeds
+    ]
 
 
 def mean_within(e: np.ndarray) -> float:
@@ -75,10 +77,16 @@ def embedding_shift(registry, sizes, winds, seeds) -> list[dict]:
             es = base.embedder.embed_many(clips(other, truth, seeds))
             other.renderer.close()
             size_d = squared_distance(e0.mean(0), es.mean(0))
-            rows.append({
-                "wind": wind, "size": list(size), "size_shift": size_d, "wind_plus_1_shift": wind_d,
-                "seed_noise": noise, "size_over_wind": size_d / wind_d,
-            })
+            rows.append(
+                {
+                    "wind": wind,
+                    "size": list(size),
+                    "size_shift": size_d,
+                    "wind_plus_1_shift": wind_d,
+                    "seed_noise": noise,
+                    "size_over_wind": size_d / wind_d,
+                }
+            )
             print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     base.renderer.close()
     return rows
@@ -106,13 +114,22 @@ def run(args: argparse.Namespace) -> dict:
         pipeline = build_pipeline(registry, "flag", embedder="", scene_set=scene_of_size(size))
         for wind in winds:
             truth = truth_at(pipeline.simulator.parameter_space, wind)
-            target = Target.synthetic(pipeline.simulator, pipeline.renderer, truth, seed=12345, description="")
+            target = Target.synthetic(
+                pipeline.simulator, pipeline.renderer, truth, seed=12345, description=""
+            )
             video = work / f"target_{size[0]:g}x{size[1]:g}_{wind:g}.mp4"
             write_video(video, target.clip)
-            report = posterior_of_clip(estimator, post_pipe.embedder, target.clip, n_samples=2000, seed=0)
+            report = posterior_of_clip(
+                estimator, post_pipe.embedder, target.clip, n_samples=2000, seed=0
+            )
             m = report.marginals["wind_speed"]
-            row = {"size": list(size), "wind": wind, "posterior_wind_median": m["median"],
-                   "posterior_wind_ci90": m["ci90"], "posterior_covers_truth": m["ci90"][0] <= wind <= m["ci90"][1]}
+            row = {
+                "size": list(size),
+                "wind": wind,
+                "posterior_wind_median": m["median"],
+                "posterior_wind_ci90": m["ci90"],
+                "posterior_covers_truth": m["ci90"][0] <= wind <= m["ci90"][1],
+            }
             for label, scene in (("with_scene", scene_of_size(size)), ("without_scene", None)):
                 t1 = time.perf_counter()
                 result = refine(
@@ -147,9 +164,13 @@ def run(args: argparse.Namespace) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", default="0.9x0.6,3x2", help="LxH flag sizes in metres, comma-separated")
+    parser.add_argument(
+        "--sizes", default="0.9x0.6,3x2", help="LxH flag sizes in metres, comma-separated"
+    )
     parser.add_argument("--winds", default="3,6", help="target wind speeds in m/s")
-    parser.add_argument("--seeds", type=int, default=3, help="seeds per setting for the embedding shift")
+    parser.add_argument(
+        "--seeds", type=int, default=3, help="seeds per setting for the embedding shift"
+    )
     parser.add_argument("--steps", type=int, default=16, help="refinement budget per target")
     print(json.dumps(run(parser.parse_args())))
 

@@ -12,6 +12,7 @@ import pytest
 
 from physinfer.errors import UserInputError
 from physinfer.plugins import load_registry
+from physinfer.rundir import resume_differences
 from physinfer.scene import (
     SceneSetting,
     bind_scene,
@@ -20,7 +21,6 @@ from physinfer.scene import (
     same_scene,
     scene_of,
 )
-from physinfer.rundir import resume_differences
 from physinfer.session import refine
 from physinfer.trial_workers import PipelineSpec, scene_items, worker_pipeline
 
@@ -49,7 +49,9 @@ def registry():
         ("flag_length", "--scene-set expects NAME=VALUE, got 'flag_length'"),
     ],
 )
-def test_bad_scene_settings_are_one_clear_line_before_anything_runs(physinfer_cli, tmp_path, item, expected):
+def test_bad_scene_settings_are_one_clear_line_before_anything_runs(
+    physinfer_cli, tmp_path, item, expected
+):
     out = tmp_path / "t.npz"
     ran = physinfer_cli(
         "simulate", "--plugin", "flag", "--scene-set", item, "--trajectory-out", out, "--json"
@@ -74,7 +76,12 @@ def test_resolve_scene_types_values_and_completes_them_with_defaults(registry):
     flag = registry.phenomenon("flag")
     assert resolve_scene(flag, None) is None and resolve_scene(flag, {}) is None
     scene = resolve_scene(flag, {"flag_length": "3", "pinning": " corners"})
-    assert scene == {"flag_length": 3.0, "flag_height": 1.0, "pinning": "corners", "pole_height": 3.0}
+    assert scene == {
+        "flag_length": 3.0,
+        "flag_height": 1.0,
+        "pinning": "corners",
+        "pole_height": 3.0,
+    }
     assert resolve_scene(flag, {"flag_length": 3}) == {**default_scene(flag), "flag_length": 3.0}
     with pytest.raises(UserInputError, match="give a number"):
         resolve_scene(flag, {"flag_length": True})
@@ -108,13 +115,17 @@ def test_a_dataset_records_its_scene_and_estimators_refuse_another(registry):
     flag = registry.phenomenon("flag")
     preset = next(iter(generator_for(flag).presets().values()))
     scene = resolve_scene(flag, {"flag_length": 3})
-    assert "scene" not in dataset_config(generator_for(flag), preset, 0)  # older datasets still resume
+    # No scene given: no "scene" entry, so datasets made before scenes existed still resume.
+    assert "scene" not in dataset_config(generator_for(flag), preset, 0)
     assert dataset_config(generator_for(bind_scene(flag, scene)), preset, 0)["scene"] == scene
     estimator, path = load_estimator(registry, "flag", None)
     assert estimator.config.scene is None  # the shipped one: trained on 1.5 m × 1 m flags
     estimator.check_scene(flag, None)
-    estimator.check_scene(flag, default_scene(flag))  # the defaults given explicitly: the same scene
-    with pytest.raises(UserInputError, match=r"trained on clips of the default scene, not of the scene flag_length=3,"):
+    estimator.check_scene(flag, default_scene(flag))  # the defaults given: the same scene
+    with pytest.raises(
+        UserInputError,
+        match=r"trained on clips of the default scene, not of the scene flag_length=3,",
+    ):
         estimator.check_scene(flag, scene, path)
 
 
@@ -130,14 +141,23 @@ def test_run_json_records_the_scene_and_a_resume_with_another_is_refused(registr
     assert json.loads((out / "result.json").read_text())["scene"] == scene
     # The shipped posterior was trained on 1.5 m flags: not used, and the note says why.
     assert "posterior" not in result.extra
-    assert "trained on clips of the default scene, not of the scene flag_length=0.5" in result.extra["posterior_note"]
+    assert (
+        "trained on clips of the default scene, not of the scene flag_length=0.5"
+        in result.extra["posterior_note"]
+    )
     log = (out / "trials.jsonl").read_bytes()
     for other, expected in (
         ({**SMALL, "flag_length": "0.6"}, "--scene-set flag_length: run 0.5, now 0.6"),
         (None, "--scene-set flag_height: run 0.3, now not set"),
     ):
         with pytest.raises(UserInputError, match="cannot resume") as info:
-            refine(registry, scene_set=other, resume=True, use_posterior=False, **{**settings, "steps": 3})
+            refine(
+                registry,
+                scene_set=other,
+                resume=True,
+                use_posterior=False,
+                **{**settings, "steps": 3},
+            )
         assert expected in str(info.value)
     assert (out / "trials.jsonl").read_bytes() == log
     stored = json.loads((out / "run.json").read_text())

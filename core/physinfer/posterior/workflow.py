@@ -58,6 +58,7 @@ class TrainResult:
             "clip_seconds": c.clip_seconds,
             "parameters": [p["name"] for p in c.parameters],
             "training": c.training,
+            "scene": c.scene,
             "embeddings_cache": str(self.cache),
             "seconds": self.seconds,
         }

@@ -23,29 +23,38 @@ def scene(**changes):
 
 
 def test_the_default_scene_is_the_default_flag_bit_for_bit():
-    plain, scened = make_simulator(duration_s=SHORT), make_simulator(duration_s=SHORT, scene=DEFAULT)
+    plain, scened = (
+        make_simulator(duration_s=SHORT),
+        make_simulator(duration_s=SHORT, scene=DEFAULT),
+    )
     assert plain.config == scened.config
     a = plain.simulate(DEFAULT_TRUTH_BASE, seed=3).vertices
     b = scened.simulate(DEFAULT_TRUTH_BASE, seed=3).vertices
     assert np.array_equal(a, b)
 
 
-@pytest.mark.parametrize(("length", "height", "grid"), [(0.9, 0.6, (19, 13)), (3.0, 2.0, (61, 41)), (1.2, 1.0, (25, 21))])
+@pytest.mark.parametrize(
+    ("length", "height", "grid"), [(0.9, 0.6, (19, 13)), (3.0, 2.0, (61, 41)), (1.2, 1.0, (25, 21))]
+)
 def test_other_sizes_keep_5_cm_cells_and_the_default_time_step(length, height, grid):
     config = make_simulator(scene=scene(flag_length=length, flag_height=height)).config
     assert (config.width, config.height) == (length, height)
     assert (config.grid_u, config.grid_v) == grid
     assert config.spacing == pytest.approx(0.05)
-    assert config.dt == pytest.approx(1 / 1200)  # the explicit limit is set by the cell size, as before
+    # The explicit limit is set by the cell size, not the flag's: the default step.
+    assert config.dt == pytest.approx(1 / 1200)
 
 
 def test_a_3_m_flag_flies_further_than_the_default_one():
     wind = {"wind_speed": 5.0}
     spans = {}
     for length, height in ((1.5, 1.0), (3.0, 2.0)):
-        simulator = make_simulator(duration_s=SHORT, scene=scene(flag_length=length, flag_height=height))
+        simulator = make_simulator(
+            duration_s=SHORT, scene=scene(flag_length=length, flag_height=height)
+        )
         vertices = simulator.simulate(wind, seed=0).vertices
-        spans[length] = float(np.median(vertices[:, :, 0].max(axis=1)))  # reach downwind of the pole
+        # The reach downwind of the pole.
+        spans[length] = float(np.median(vertices[:, :, 0].max(axis=1)))
     assert spans[1.5] > 1.0, spans
     assert spans[3.0] > 1.7 * spans[1.5], spans
 
@@ -82,8 +91,12 @@ def test_the_renderer_frames_a_3_m_flag_like_a_1_5_m_one():
     shares = {}
     try:
         for length, height in ((1.5, 1.0), (3.0, 2.0)):
-            simulator = make_simulator(duration_s=0.2, scene=scene(flag_length=length, flag_height=height))
-            shares[length] = silhouette_share(renderer.render(simulator.simulate({"wind_speed": 5.0}), zeta), background)
+            simulator = make_simulator(
+                duration_s=0.2, scene=scene(flag_length=length, flag_height=height)
+            )
+            shares[length] = silhouette_share(
+                renderer.render(simulator.simulate({"wind_speed": 5.0}), zeta), background
+            )
     finally:
         renderer.close()
     assert 0.15 < shares[1.5] < 0.7, shares
@@ -91,8 +104,12 @@ def test_the_renderer_frames_a_3_m_flag_like_a_1_5_m_one():
 
 
 def test_a_scene_pole_height_places_the_pole_of_a_trajectory_without_one():
-    trajectory = make_simulator(duration_s=0.04, scene=scene(flag_length=0.9, flag_height=0.6)).simulate({})
-    bare = Trajectory(trajectory.vertices, trajectory.faces, trajectory.fps, {"uv": trajectory.extras["uv"]})
+    trajectory = make_simulator(
+        duration_s=0.04, scene=scene(flag_length=0.9, flag_height=0.6)
+    ).simulate({})
+    bare = Trajectory(
+        trajectory.vertices, trajectory.faces, trajectory.fps, {"uv": trajectory.extras["uv"]}
+    )
     assert measure_flag(trajectory).pole[:, 2].tolist() == pytest.approx([0.0, 3.0])
     assert measure_flag(bare, pole_height=4.0).pole[:, 2].tolist() == pytest.approx([0.0, 4.0])
     assert make_renderer(scene(pole_height=4.0)).pole_height == 4.0
