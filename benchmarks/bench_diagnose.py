@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 import time
@@ -93,8 +94,13 @@ def load_bench_registry(frames: int | None = None) -> Any:
 
 
 def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, render_size: int | None,
-                path: Path) -> dict[str, float]:
-    """Simulate, render and write one target; returns its true parameters."""
+                path: Path, strength: float | None = None) -> dict[str, float]:
+    """Simulate, render and write one target; returns its true parameters.
+
+    ``strength``: the hidden effect's parameters that far along their path from off to the
+    far end of their range (:func:`physinfer.diagnose.limits.strength_path`; the power
+    curves) instead of a random realistic strength.
+    """
     from physinfer.session import build_pipeline
     from physinfer.video import write_video
 
@@ -105,7 +111,12 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     for name, (lo, hi) in BASE_RANGES.items():
         if name in truth:
             truth[name] = float(rng.uniform(lo, hi))
-    if hidden:
+    if hidden and strength is not None:
+        from physinfer.diagnose.limits import strength_path, values_at
+
+        effect_space = pipeline.effects[0].parameter_space
+        truth.update(values_at(effect_space, *strength_path(effect_space), strength))
+    elif hidden:
         for name, (lo, hi) in STRENGTHS[hidden].items():
             value = float(rng.uniform(lo, hi))
             truth[name] = value * (rng.choice([-1.0, 1.0]) if name in SIGNED else 1.0)
@@ -123,23 +134,26 @@ def _size_key(zeta: dict[str, Any]) -> str:
     return "image_size" if "image_size" in zeta else "size"
 
 
-def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str) -> Path:
+def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str, strength: float | None = None) -> Path:
     """The directory of one case (target, truth, diagnosis stages, row)."""
-    return Path(out) / f"{plugin}-{hidden or 'none'}-s{seed}"
+    power = "" if strength is None else f"-p{strength:g}"
+    return Path(out) / f"{plugin}-{hidden or 'none'}{power}-s{seed}"
 
 
-def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace,
+             strength: float | None = None) -> dict[str, Any]:
     """Make one target and diagnose it; the row is also written to ``case.json``."""
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.io import atomic_write_json
 
     registry = load_bench_registry(args.frames)
-    case_dir = case_dir_of(plugin, hidden, seed, args.out)
+    case_dir = case_dir_of(plugin, hidden, seed, args.out, strength)
     truth_file = case_dir / "truth.json"
     if truth_file.is_file():
         truth = json.loads(truth_file.read_text())
     else:
-        truth = make_target(registry, plugin, hidden, seed, args.render_size, case_dir / "target.mp4")
+        truth = make_target(registry, plugin, hidden if strength != 0 else None, seed, args.render_size,
+                            case_dir / "target.mp4", strength)
         truth_file.write_text(json.dumps(truth))
     render_set = {}
     if args.render_size is not None:
@@ -167,6 +181,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             calibration_runs=args.calibration_runs,
             calibration_control=not args.no_calibration_control,
             videos=False,
+            limits=not args.no_limits,
         ),
     )
     row = {
@@ -195,6 +210,11 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         },
         "truth": truth,
         "fixed": report["settings"]["fixed"],
+        "strength": strength,
+        "limits": {c["effect"]: {"detectable_from": c.get("detectable_from"),
+                                 "fraction": c.get("limit", {}).get("fraction"),
+                                 "reason": c.get("limit", {}).get("reason")} for c in report["candidates"]},
+        "limit_cost": report.get("limits"),
         "wall_time_s": time.perf_counter() - t0,
     }
     atomic_write_json(case_dir / "case.json", row)
@@ -298,6 +318,105 @@ def summarise(cases: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def power_cases(args: argparse.Namespace, effects: list[str]) -> list[tuple[str | None, float, int, str]]:
+    """Every (hidden effect or None, strength, seed, effect) of the power table; strength 0 is clean."""
+    rows = []
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for effect in effects:
+            for strength in args.strengths:
+                rows.append((None if strength == 0 else effect, strength, seed, effect))
+    return rows
+
+
+def _crossing(xs: list[float], ys: list[float], level: float) -> float | None:
+    """Where the piecewise-linear curve ``ys(xs)`` first reaches ``level``."""
+    for (x0, y0), (x1, y1) in zip(zip(xs, ys, strict=True), list(zip(xs, ys, strict=True))[1:], strict=False):
+        if y0 < level <= y1:
+            return x0 + (x1 - x0) * (level - y0) / (y1 - y0)
+    return xs[0] if ys and ys[0] >= level else None
+
+
+def summarise_power(rows: list[dict[str, Any]], effect: str, strengths: list[float]) -> dict[str, Any]:
+    """Named-rate against strength, the ladder's prediction of it, and the two half-way strengths.
+
+    The prediction for one target: its effect would be named at strength ``s`` if the limit
+    that its own diagnosis reported (a fraction of the path) is at most ``s``. The strength
+    named half the time (``s50``, interpolated) is compared with the median per-target limit
+    (a target whose effect has no limit counts as beyond the range).
+    """
+    per = []
+    for s in strengths:
+        group = [r for r in rows if r["strength"] == s]
+        limits = [r["limits"].get(effect, {}).get("fraction") for r in group]
+        per.append({
+            "strength": s,
+            "n": len(group),
+            "named": sum(r["named"] == effect for r in group),
+            "named_other": sum(r["named"] not in (None, effect) for r in group),
+            "misspecified": sum(bool(r["misspecified"]) for r in group),
+            "named_rate": (sum(r["named"] == effect for r in group) / len(group)) if group else None,
+            "predicted_rate": (sum(f is not None and f <= s for f in limits) / len(group)) if group and s > 0 else 0.0,
+            "limits": limits,
+        })
+    curve = [p for p in per if p["n"]]
+    s50 = _crossing([p["strength"] for p in curve], [p["named_rate"] for p in curve], 0.5)
+    every = sorted(math.inf if f is None else f for p in per for f in p["limits"])
+    median_limit = statistics.median(every) if every else None
+    clean = next((p for p in per if p["strength"] == 0), None)
+    return {
+        "effect": effect,
+        "curve": per,
+        "false_discoveries": None if clean is None else sum(
+            bool(r["misspecified"]) or r["named"] is not None for r in rows if r["strength"] == 0),
+        "n_clean": 0 if clean is None else clean["n"],
+        "s50": s50,
+        "median_limit": None if median_limit is None or math.isinf(median_limit) else median_limit,
+        "limit_over_s50": (median_limit / s50) if s50 and median_limit and math.isfinite(median_limit) else None,
+    }
+
+
+def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path: Path) -> None:
+    """Named-rate (observed, and predicted by the per-target limits) against strength, one panel per effect."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from physinfer.diagnose.limits import strength_path, values_at
+
+    fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 3.4), squeeze=False)
+    for ax, summ in zip(axes[0], summaries, strict=True):
+        effect_space = registry.effect(summ["effect"], phenomenon=plugin_name(registry, plugin)).parameter_space
+        moved, held = strength_path(effect_space)
+        name = next(iter(moved))
+
+        def value(f: float, moved: Any = moved, held: Any = held, space: Any = effect_space, name: str = name) -> float:
+            return values_at(space, moved, held, f)[name]
+
+        xs = [value(p["strength"]) for p in summ["curve"]]
+        ax.plot(xs, [p["named_rate"] for p in summ["curve"]], "o-", label="named (diagnoses)")
+        ax.plot(xs, [p["predicted_rate"] for p in summ["curve"]], "s--", label="predicted (per-target limit)")
+        if summ["s50"] is not None:
+            ax.axvline(value(summ["s50"]), color="C0", lw=0.8, ls=":", label="named half the time")
+        if summ["median_limit"] is not None:
+            ax.axvline(value(summ["median_limit"]), color="C1", lw=0.8, ls=":", label="median limit")
+        ax.set_xlabel(name)
+        ax.set_ylabel("share of targets")
+        ax.set_ylim(-0.05, 1.05)
+        fd = summ["false_discoveries"]
+        ax.set_title(f"{summ['effect']}  (false discoveries at 0: {fd}/{summ['n_clean']})", fontsize=9)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plugin_name(registry: Any, plugin: str) -> str:
+    """The phenomenon's own name (``flag_lite`` is the flag)."""
+    return registry.phenomenon(plugin).name
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--plugin", default="pendulum")
@@ -331,11 +450,21 @@ def main() -> None:
     parser.add_argument("--compare-calibration", action="store_true",
                         help="with --merge: each case's decisions under earlier calibrations and rules (from its stored gaps)")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
+    parser.add_argument("--no-limits", action="store_true", help="diagnose without the detection limits")
+    parser.add_argument("--power", action="store_true",
+                        help="power curves: each hidden effect at --strengths (fractions of the way from off to the "
+                             "far end of its range; 0 is a clean target) for --seeds seeds; the named-rate per "
+                             "strength, the false discoveries at 0 and the per-target limits' prediction")
+    parser.add_argument("--strengths", type=float, nargs="*", default=[0.0, 0.25, 0.5, 1.0])
+    parser.add_argument("--plot", default=None, help="with --power: write the power curves to this PNG")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 
     registry = load_bench_registry(args.frames)
     effects = args.effects if args.effects is not None else registry.effects_of(registry.phenomenon(args.plugin).name)
+    if args.power:
+        run_power(args, registry, effects)
+        return
     all_cases = case_list(args, effects)
     start = time.perf_counter()
     cases = []
@@ -372,6 +501,34 @@ def main() -> None:
         "cases": cases,
     }
     print(json.dumps(out))
+
+
+
+def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> None:
+    """``--power``: run (or, with ``--merge``, read) the power table and print its summary."""
+    start = time.perf_counter()
+    rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    shard, n_shards = parse_shard(args.shard)
+    for hidden, strength, seed, effect in power_cases(args, effects):
+        row_file = case_dir_of(args.plugin, hidden, seed, args.out, strength) / "case.json"
+        if args.merge or (seed - args.first_seed) % n_shards != shard:
+            if row_file.is_file():
+                rows[effect].append(json.loads(row_file.read_text()))
+            elif args.merge:
+                print(f"missing: {row_file}", file=sys.stderr)
+            continue
+        case = json.loads(row_file.read_text()) if row_file.is_file() else run_case(
+            args.plugin, hidden, seed, args, strength)
+        lim = case["limits"].get(effect, {})
+        print(json.dumps({"effect": effect, "strength": strength, "seed": seed, "named": case["named"],
+                          "limit": lim.get("fraction"), "reason": lim.get("reason")}), file=sys.stderr, flush=True)
+        rows[effect].append(case)
+    summaries = [summarise_power(rows[e], e, list(args.strengths)) for e in effects if rows[e]]
+    if args.plot and summaries:
+        plot_power(summaries, registry, args.plugin, Path(args.plot))
+    print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "power": summaries,
+                      "wall_time_s": time.perf_counter() - start,
+                      "cases": [r for e in effects for r in rows[e]]}))
 
 
 if __name__ == "__main__":

@@ -83,7 +83,7 @@ class LimitConfig:
 
     fractions: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
     seeds: int = 3
-    step: float = 0.2
+    step: float = 0.4
     reveal: bool = False
     budget_share: float = 0.2
 
@@ -324,33 +324,87 @@ def predicted_refit(
     return min(unmoved, cross_median(rung, base_embeddings + jac @ delta)), delta
 
 
+@dataclass
+class RefitState:
+    """A measured refit's memory, carried from rung to rung (a continuation along the ladder).
+
+    ``jac`` is the Jacobian, updated by Broyden's rank-one rule after every simulated step;
+    ``u``/``emb`` the best base point found for the previous rung and its embeddings.
+    """
+
+    jac: np.ndarray
+    u: np.ndarray
+    emb: np.ndarray
+
+    def broyden(self, du: np.ndarray, dm: np.ndarray) -> None:
+        """Make ``jac`` reproduce the change ``dm`` seen over the step ``du``."""
+        norm = float(du @ du)
+        if norm > 1e-12 and np.isfinite(dm).all():
+            self.jac = self.jac + np.outer(dm - self.jac @ du, du) / norm
+
+
 def measured_refit(
     probe: Probe,
-    theta: Mapping[str, float],
     rung: np.ndarray,
-    base_embeddings: np.ndarray,
-    jac: np.ndarray,
+    state: RefitState,
+    start: tuple[np.ndarray, np.ndarray],
     delta: np.ndarray,
     seeds: Sequence[int],
+    *,
+    multipliers: Sequence[float],
+    polish: int,
     keep: Sequence[bool] | None = None,
 ) -> tuple[float, np.ndarray]:
-    """Simulate θ̂ + Δ, take a second Gauss–Newton step with the same Jacobian; the best gap and its Δ."""
+    """Refit the baseline to a rung, every point simulated: a line search, then Gauss–Newton.
+
+    The embedding is far from linear in some parameters, and the distance is bumpy (the
+    pendulum's decay envelope in its damping: a linear step from θ̂ goes less than half way
+    to an exactly mimicking damping, and the distance rises and falls on the way). So the
+    linear refit's step ``delta`` from θ̂ is tried at ``multipliers`` of its length (inside
+    the box), and the best of those, θ̂ itself and the previous rung's refit is polished by
+    ``polish`` Gauss–Newton steps on the Broyden-updated Jacobian.
+
+    Args:
+        probe: Simulates and embeds.
+        rung: ``(n, D_e)`` the rung's embeddings.
+        state: The Jacobian and the previous rung's refit (updated here).
+        start: θ̂'s ``(u0, embeddings)``.
+        delta: The linear refit's step for this rung.
+        seeds: Seeds of every simulated point.
+        multipliers: Line-search lengths.
+        polish: Gauss–Newton steps.
+        keep: Base parameters the refit may move.
+
+    Returns:
+        The best gap and its point (normalised).
+    """
     space: ParameterSpace = probe.base.simulator.parameter_space
-    u0 = space.to_unit(space.complete(theta))
-    best, best_delta = cross_median(rung, base_embeddings), np.zeros_like(delta)
-    for _ in range(2):
-        if not np.any(np.abs(delta) > 1e-9):
+    u0, emb0 = start
+    goal = np.nanmean(rung, axis=0)
+    points = [(u0, emb0), (state.u, state.emb)]
+
+    def visit(u: np.ndarray, origin: tuple[np.ndarray, np.ndarray]) -> None:
+        if any(np.max(np.abs(u - p)) < 1e-3 for p, _ in points):
+            return
+        params = space.from_unit(u)
+        emb = probe.embed(probe.trajectories(probe.base.simulator, [params] * len(seeds), seeds))
+        state.broyden(u - origin[0], np.nanmean(emb, axis=0) - np.nanmean(origin[1], axis=0))
+        points.append((u, emb))
+
+    for t in multipliers:
+        visit(np.clip(u0 + t * delta, -1.0, 1.0), start)
+    gaps = [cross_median(rung, e) for _, e in points]
+    for _ in range(polish):
+        best = points[int(np.nanargmin(gaps))]
+        step = linear_refit(state.jac, goal - np.nanmean(best[1], axis=0), best[0], keep)
+        before = len(points)
+        visit(np.clip(best[0] + step, -1.0, 1.0), best)
+        if len(points) == before:
             break
-        u = np.clip(u0 + delta, -1.0, 1.0)
-        emb = probe.embed(
-            probe.trajectories(probe.base.simulator, [space.from_unit(u)] * len(seeds), seeds)
-        )
-        gap = cross_median(rung, emb)
-        if gap < best:
-            best, best_delta = gap, u - u0
-        residual = np.nanmean(rung, axis=0) - np.nanmean(emb, axis=0)
-        delta = (u - u0) + linear_refit(jac, residual, u, keep)
-    return best, best_delta
+        gaps.append(cross_median(rung, points[-1][1]))
+    i = int(np.nanargmin(gaps))
+    state.u, state.emb = points[i]
+    return gaps[i], points[i][0]
 
 
 def interpolate_limit(
@@ -430,18 +484,23 @@ def effect_limit(
             }
         )
 
+    state = RefitState(jac.copy(), u0, base_embeddings)
+    # A deterministic rung is one simulation per point: search more (see measured_refit).
+    multipliers, polish = ((1.0, 1.5, 2.0, 3.0), 2) if measure == "all" else ((1.0, 2.0), 1)
+
     def measure_rung(i: int) -> None:
         r = rungs[i]
         if r["measured"] or measure == "none":
             return
-        gap, delta = measured_refit(
-            probe, theta, ladder.embeddings[i], base_embeddings, jac, r["delta"], seeds, keep
-        )
-        r.update(
-            refit_gap=min(gap, r["shift"]),
-            measured=True,
-            delta=delta if gap < r["shift"] else r["delta"],
-        )
+        gap, u = measured_refit(
+            probe, ladder.embeddings[i], state, (u0, base_embeddings), r["delta"], seeds,
+            multipliers=multipliers, polish=polish, keep=keep,
+        )  # fmt: skip
+        if gap < r["shift"]:
+            r.update(refit_gap=gap, delta=u - u0)
+        else:
+            r.update(refit_gap=r["shift"], delta=np.zeros_like(u0))
+        r["measured"] = True
 
     order = range(len(rungs)) if measure == "all" else [len(rungs) - 1]
     for i in order:
@@ -491,10 +550,11 @@ def _movers(space: ParameterSpace, delta: np.ndarray, jac: np.ndarray) -> list[s
     if not contrib.any():
         return []
     order = np.argsort(-contrib)
+    # A parameter moved by less than a twentieth of its range is not what mimics the effect.
     return [
         space.names[d]
         for d in order
-        if contrib[d] >= 0.2 * contrib[order[0]] and abs(delta[d]) > 1e-3
+        if contrib[d] >= 0.2 * contrib[order[0]] and abs(delta[d]) > 0.1
     ]
 
 
@@ -578,9 +638,12 @@ def detection_limits(
     deterministic = pairwise_median(base_emb) == 0.0
     n = _plan_seeds(inputs, config, deterministic)
     seeds = ladder_seeds(inputs.seed, n)
+    # The baseline's own simulations (Jacobian, refits) never share a seed with a rung: with
+    # common seeds a chaotic clip's noise would cancel and the refit look better than it is.
+    refit_seeds = ladder_seeds(inputs.seed + 1, n)
     space: ParameterSpace = inputs.base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
-    jac, jac_trajs = jacobian(probe, theta, base_emb, seeds, config.step)
+    jac, jac_trajs = jacobian(probe, theta, base_emb, refit_seeds, config.step)
     seconds = next((t.vertices.shape[0] / t.fps for t in jac_trajs if t is not None), None)
     measure = "all" if deterministic else "key"
     effects: dict[str, Any] = {}
@@ -602,21 +665,24 @@ def detection_limits(
             base_emb,
             jac,
             threshold,
-            seeds,
+            refit_seeds,
             effect_space=effect_space,
             measure=measure,
         )
         limit["threshold"] = threshold
         limit["reveal"] = _reveal_by_fixing(
-            probe, ladders[name], theta, base_emb, jac, threshold, seeds, limit, effect_space
+            probe, ladders[name], theta, base_emb, jac, threshold, refit_seeds, limit, effect_space
         )
         effects[name] = limit
         say(f"      {name}: " + summary_phrase(limit))
     if config.reveal and not deterministic:
-        _reveal_by_setting(probe, inputs, config, effects, ladders, theta, seeds, jac_trajs, say)
+        _reveal_by_setting(
+            probe, inputs, config, effects, ladders, theta, refit_seeds, jac_trajs, say, seeds
+        )
     return {
         "effects": effects,
         "seeds": seeds,
+        "refit_seeds": refit_seeds,
         "deterministic": deterministic,
         "simulations": probe.simulations,
         "diagnosis_simulations": inputs.diagnosis_simulations,
@@ -716,12 +782,14 @@ def _reveal_by_setting(
     seeds: Sequence[int],
     jac_trajs: list[Any],
     say: Log,
+    rung_seeds: Sequence[int] = (),
 ) -> None:
     """Another view (re-rendered) and a twice longer clip (re-simulated), for effects not yet detectable at half range.
 
     The null scale there is unknown: the threshold is scaled by the ratio of the noise
     floors (new / current), both measured on ``n`` fresh re-simulations of θ̂; the current
     setting's limit is recomputed on those too, so the factor compares like with like.
+    ``seeds`` are the baseline's (the Jacobian's), ``rung_seeds`` the ladder's.
     """
     wanted = [
         name for name, lim in effects.items() if lim["fraction"] is None or lim["fraction"] > 0.5
@@ -830,8 +898,8 @@ def _reveal_by_setting(
             values = ladders[name].values
             trajs = longer_probe.trajectories(
                 aug_sims[name],
-                [{**theta, **v} for v in values for _ in seeds],
-                list(seeds) * len(values),
+                [{**theta, **v} for v in values for _ in rung_seeds],
+                list(rung_seeds) * len(values),
             )
             rungs[name] = [
                 longer_probe.embed(trajs[i * len(seeds) : (i + 1) * len(seeds)], None, embedder)

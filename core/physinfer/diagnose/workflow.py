@@ -596,6 +596,7 @@ def _limits(
     say: Log,
 ) -> dict[str, Any]:
     """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``."""
+    import dataclasses
     import json
 
     from physinfer.diagnose.limits import LimitInputs, detection_limits
@@ -603,7 +604,8 @@ def _limits(
     theta = before.best_params
     fixed = fixed_by_user(base, settings.fixed)
     key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": float(scale),
-           "effects": sorted(effect_objs), "config": settings.limit_config.to_dict(), "seed": settings.seed}
+           "effects": sorted(effect_objs), "config": settings.limit_config.to_dict(), "seed": settings.seed,
+           "rule": dataclasses.asdict(settings.rule), "floor_samples": settings.floor_samples}
     path = settings.out / "limits.json"
     if path.is_file():
         stored = json.loads(path.read_text())

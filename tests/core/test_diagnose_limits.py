@@ -1,0 +1,230 @@
+"""Tests of physinfer.diagnose.limits: the detection limit of an effect on this target's setting.
+
+Real simulations of the pendulum example (its renderer and the grid-spectrum embedder); a
+jittery pendulum (the bob shaken by seeded noise, as a shaky video is) stands in for a
+noisy phenomenon, and a second linear damping for an effect the base parameters mimic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from physinfer.diagnose.decide import DecisionRule
+from physinfer.diagnose.limits import (
+    LimitConfig,
+    LimitInputs,
+    Probe,
+    detection_limits,
+    interpolate_limit,
+    limit_line,
+    pairwise_median,
+    required_gap,
+    strength_path,
+    values_at,
+)
+from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.roles import Effect
+
+THETA = {"length": 1.1, "damping": 0.1, "amplitude": 40.0}
+
+
+# ------------------------------------------------------------------------------- units
+
+
+def test_the_threshold_is_the_rule_s():
+    rule = DecisionRule()
+    assert required_gap(1.0, 1, rule, n_candidates=1, n_seeds=4) == pytest.approx(
+        2.0
+    )  # improvement > S
+    # Four parameters must pay 0.8^4: the gap must be 2.44 null scales.
+    assert required_gap(1.0, 4, rule, n_candidates=1, n_seeds=4) == pytest.approx(0.8**-4)
+    # Four candidates and 4 against 4 re-simulations: the rank test cannot reach 0.05 / 4,
+    # the effect test cannot fire, and the gap test's factor applies.
+    strict = DecisionRule(misspecified_factor=3.0)
+    assert required_gap(1.0, 1, strict, n_candidates=4, n_seeds=4) == pytest.approx(3.0)
+    assert required_gap(1.0, 1, strict, n_candidates=4, n_seeds=8) == pytest.approx(2.0)
+    assert (
+        required_gap(1.0, 1, DecisionRule(misspecified_factor=3.0, effect_evidence=False), 1, 8)
+        == 3.0
+    )
+
+
+def test_the_ladder_moves_magnitudes_and_holds_shapes():
+    gusts = ParameterSpace(
+        [
+            ParameterSpec("gust_intensity", (0.0, 0.5), default=0.0),
+            ParameterSpec("gust_timescale", (0.2, 5.0), scaling="log", default=1.0),
+        ]
+    )
+    moved, held = strength_path(gusts)
+    assert set(moved) == {"gust_intensity"} and held == {"gust_timescale": 1.0}
+    assert values_at(gusts, moved, held, 0.5) == pytest.approx(
+        {"gust_intensity": 0.25, "gust_timescale": 1.0}
+    )
+    yaw = ParameterSpace([ParameterSpec("wind_yaw_deg", (-60.0, 60.0), default=0.0)])
+    moved, held = strength_path(yaw)
+    assert values_at(yaw, moved, held, 1.0) == {"wind_yaw_deg": 60.0} and not held
+
+
+def test_interpolation_between_and_below_rungs():
+    fractions = [0.125, 0.25, 0.5, 1.0]
+    # Below the first rung the excess over the floor grows as the strength squared.
+    assert interpolate_limit(fractions, [4.0, 8.0, 16.0, 32.0], 0.0, 1.0) == pytest.approx(0.0625)
+    # Between rungs: a power law; a gap that never clears the threshold gives no limit.
+    assert interpolate_limit(fractions, [0.5, 1.0, 4.0, 8.0], 0.0, 2.0) == pytest.approx(
+        0.25 * 2**0.5
+    )
+    assert interpolate_limit(fractions, [0.1, 0.2, 0.3, 0.4], 0.0, 1.0) is None
+
+
+def test_the_printed_line():
+    shear = {
+        "effect": "wind_shear",
+        "detectable_from": {"shear_exponent": 0.55},
+        "limit": {
+            "reason": None,
+            "reveal": [
+                {
+                    "change": "--fix area_weight=<its value>",
+                    "detectable_from": {"shear_exponent": 0.3},
+                    "factor": 1.8,
+                }
+            ],
+        },
+    }
+    assert limit_line(shear, None, 8.0) == (
+        "wind_shear: not named; this 8-s clip could reveal shear_exponent ≥ 0.55 "
+        "(lower with --fix area_weight=<its value>: shear_exponent ≥ 0.3, 1.8x lower)"
+    )
+    mimicked = {
+        "effect": "x",
+        "detectable_from": None,
+        "limit": {"reason": "mimicked by damping", "reveal": []},
+    }
+    assert limit_line(mimicked, "x", None) == (
+        "x: named; this clip could not reveal it at any strength in its range (mimicked by damping)"
+    )
+
+
+# --------------------------------------------------------------------- real simulations
+
+
+class ExtraDamping(Effect):
+    """A second linear damping: exactly what the base parameter ``damping`` does."""
+
+    name = "extra_damping"
+    description = "a second linear damping (the base damping mimics it)"
+    phenomenon = "pendulum"
+    parameter_space = ParameterSpace(
+        [ParameterSpec("damping_extra", (0.0, 0.3), "1/s", default=0.0)]
+    )
+
+    def term(self, state, params, t):
+        return -params["damping_extra"] * state[1]
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    from pendulum_example.render import PendulumRenderer
+
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    renderer = PendulumRenderer()
+    yield registry.phenomenon("pendulum"), renderer
+    renderer.close()
+
+
+def _jittery(jitter: float, n_frames: int, effects=()):
+    """The pendulum with its bob shaken sideways by seeded noise of ``jitter`` metres per frame."""
+    from pendulum_example.physics import PendulumConfig, PendulumSimulator
+
+    class Jittery(PendulumSimulator):
+        def simulate(self, params, *, seed=0):
+            traj = super().simulate(params, seed=seed)
+            shake = np.random.default_rng(seed).normal(0.0, jitter, (traj.vertices.shape[0], 1, 1))
+            vertices = traj.vertices.copy()
+            vertices[..., :1] += shake.astype(np.float32)
+            return dataclasses.replace(traj, vertices=vertices)
+
+    return Jittery(effects=effects, config=PendulumConfig(n_frames=n_frames))
+
+
+def _limits(
+    pendulum,
+    base_sim,
+    effect_sims,
+    embedder,
+    *,
+    scale=None,
+    seeds=2,
+    fractions=(0.125, 0.25, 0.5, 1.0),
+):
+    """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor."""
+    from physinfer.refine import Pipeline
+
+    phenomenon, renderer = pendulum
+    base = Pipeline(phenomenon, base_sim, renderer, embedder, [])
+    augmented = {
+        name: Pipeline(phenomenon, sim, renderer, embedder, list(sim.effects))
+        for name, sim in effect_sims
+    }
+    probe = Probe(base, {"size": 48})
+    base_emb = probe.embed(probe.trajectories(base_sim, [THETA] * 4, [11, 12, 13, 14]))
+    inputs = LimitInputs(
+        base=base, augmented=augmented, theta=THETA, base_embeddings=base_emb, render_params={"size": 48},
+        scale=pairwise_median(base_emb) if scale is None else scale, rule=DecisionRule(), floor_samples=4, seed=0,
+        diagnosis_simulations=300,
+    )  # fmt: skip
+    return detection_limits(inputs, LimitConfig(seeds=seeds, fractions=fractions))
+
+
+def _drag_limit(pendulum, jitter: float, n_frames: int) -> float:
+    from pendulum_example.physics import QuadraticDrag
+
+    from physinfer.embedders import GridSpectrumEmbedder
+
+    drag = ("quadratic_drag", _jittery(jitter, n_frames, [QuadraticDrag()]))
+    embedder = GridSpectrumEmbedder(n_frames=n_frames)
+    # Three rungs instead of four: the test's time.
+    result = _limits(
+        pendulum, _jittery(jitter, n_frames), [drag], embedder, fractions=(0.25, 0.5, 1.0)
+    )
+    assert not result["deterministic"] and len(result["seeds"]) == 2
+    return result["effects"]["quadratic_drag"]["detectable_from"]["drag_quadratic"]
+
+
+def test_the_limit_falls_with_clip_length_and_rises_with_noise(pendulum):
+    """A longer clip averages the shake out; more shake hides more drag. The null scale is the
+    measured noise floor of each setting (what a perfect model leaves)."""
+    by_length = [_drag_limit(pendulum, 0.1, n) for n in (20, 40, 80)]
+    assert by_length[0] > by_length[1] > by_length[2], by_length
+    quieter = _drag_limit(pendulum, 0.03, 20)
+    assert quieter < by_length[0], (quieter, by_length)
+
+
+def test_an_effect_the_base_parameters_mimic_is_reported_as_mimicked(pendulum):
+    """A second damping shifts the embedding far above the threshold, but the baseline's own
+    damping reproduces it: no limit, and the reason names damping (drag, which damping only
+    partly absorbs, gets a limit in the test above)."""
+    from pendulum_example.physics import PendulumConfig, PendulumSimulator
+
+    from physinfer.embedders import GridSpectrumEmbedder
+
+    short = PendulumConfig(n_frames=50)  # 2 s: the test's time
+    effects = [("extra_damping", PendulumSimulator(effects=[ExtraDamping()], config=short))]
+    base = PendulumSimulator(config=short)
+    result = _limits(pendulum, base, effects, GridSpectrumEmbedder(n_frames=50), scale=0.2)
+    assert result["deterministic"] and len(result["seeds"]) == 1
+    mimic = result["effects"]["extra_damping"]
+    assert mimic["detectable_from"] is None and mimic["fraction"] is None
+    assert (
+        mimic["reason"].startswith("mimicked by damping") and mimic["mimicked_by"][0] == "damping"
+    )
+    top = mimic["rungs"][-1]
+    assert top["shift"] > 3 * mimic["threshold"] > 3 * top["refit_gap"]  # visible, yet reproduced
+    assert top["measured"] and top["refit_step"]["damping"] > 0.5  # the refit turned the damping up
+    assert result["simulations"] <= 40  # 3 Jacobian points, 4 rungs, their refits
