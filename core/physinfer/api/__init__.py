@@ -91,6 +91,7 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
         UserInputError: an unknown parameter, render setting or effect; a bad output path.
     """
     from physinfer.parameters import parse_float_assignments
+    from physinfer.scene import scene_of
     from physinfer.session import build_pipeline, naming_effects
 
     o = with_settings(SimulateOptions, options, settings)
@@ -98,7 +99,7 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
     out, trajectory_out = _optional(o.out), _optional(o.trajectory_out)
     _check_simulate_outputs(out, trajectory_out)
     pipeline = build_pipeline(
-        registry(), plugin, effects=effects, embedder="", duration_s=o.duration, **_scene(o)
+        registry(), plugin, effects=effects, embedder="", duration_s=o.duration, scene_set=o.scene_set
     )
     with naming_effects(
         registry(), plugin, effects, "--set"
@@ -116,6 +117,7 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
     sim = Simulation(
         plugin, params, effects, o.seed, trajectory, seconds={"simulate": time.perf_counter() - t0}
     )
+    sim.scene = scene_of(pipeline.phenomenon)
     if trajectory_out is not None:
         trajectory.save(trajectory_out)
         sim.paths["trajectory"] = str(trajectory_out)
@@ -138,12 +140,6 @@ def _check_simulate_outputs(out: Path | None, trajectory_out: Path | None) -> No
     for option, path in (("--out", out), ("--trajectory-out", trajectory_out)):
         if path is not None and path.is_dir():
             raise UserInputError(f"{option} {path} is a directory; give a file name")
-
-
-def _scene(o: ModelOptions) -> dict[str, Any]:
-    """``scene_set`` for the session functions, only when given (phenomena without scene
-    settings then never see it)."""
-    return {"scene_set": dict(o.scene_set)} if o.scene_set else {}
 
 
 def refine(
@@ -205,7 +201,7 @@ def refine(
         embedder_frames=o.embedder_frames,
         posterior=_optional(o.posterior),
         use_posterior=not o.no_posterior,
-        **_scene(o),
+        scene_set=o.scene_set,
     )
 
 
@@ -226,9 +222,15 @@ def diagnose(
         **settings: Fields of :class:`DiagnoseOptions`.
     """
     from physinfer.diagnose.decide import DecisionRule
+    from physinfer.diagnose.limits import LimitConfig
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
 
     o = with_settings(DiagnoseOptions, options, settings)
+    plugins = registry()
+    if o.scene_set:  # every model of the diagnosis is built from the scene-bound phenomenon
+        from physinfer.scene import SceneRegistry
+
+        plugins = SceneRegistry(plugins, plugin, dict(o.scene_set))
     out = _optional(o.out) or _default_out(f"diagnose-{plugin}")
     diagnose_settings = DiagnoseSettings(
         plugin=plugin,
@@ -261,9 +263,10 @@ def diagnose(
             effect_evidence=not o.require_gap_test,
         ),
         videos=not o.no_video,
-        **_scene(o),
+        limits=o.limits,
+        limit_config=LimitConfig(reveal=o.reveal),
     )
-    report = run_diagnosis(registry(), diagnose_settings, log=log)
+    report = run_diagnosis(plugins, diagnose_settings, log=log)
     return Diagnosis.from_report(report, out)
 
 
@@ -293,4 +296,5 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
         n_samples=o.samples,
         seed=o.seed,
         device=o.device,
+        scene_set=o.scene_set,
     )

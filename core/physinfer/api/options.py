@@ -149,6 +149,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
         threshold: The gap test finds the model misspecified above this many null scales.
         require_gap_test: Name an effect only when the gap test alone finds a misspecification.
         no_video: Skip the side-by-side video.
+        limits: Estimate each effect's detection limit from a ladder of simulations.
+        reveal: Also measure whether another view or a longer clip would lower the limits.
     """
 
     out: Path | None = None
@@ -161,6 +163,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
     threshold: float = 2.0
     require_gap_test: bool = False
     no_video: bool = False
+    limits: bool = True
+    reveal: bool = False
 
 
 @dataclass(frozen=True)
@@ -173,6 +177,7 @@ class InferOptions(TargetOptions):
         samples: Posterior samples drawn.
         seed: Seed of the sampling.
         device: torch device.
+        scene_set: The scene's known settings; an estimator trained on another scene is refused.
     """
 
     posterior: Path | None = None
@@ -180,6 +185,7 @@ class InferOptions(TargetOptions):
     samples: int = 5000
     seed: int = 0
     device: str | None = None
+    scene_set: Mapping[str, Any] = field(default_factory=dict)
 
 
 Options = TypeVar("Options", SimulateOptions, RefineOptions, DiagnoseOptions, InferOptions)

@@ -31,6 +31,7 @@ class Simulation:
         render_params: ζ it was rendered with.
         seconds: Time to simulate and to render.
         paths: Files written (``video``, ``trajectory``).
+        scene: The scene's settings when given (``scene_set``), else ``None``.
     """
 
     plugin: str
@@ -42,6 +43,7 @@ class Simulation:
     render_params: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     paths: dict[str, str] = field(default_factory=dict)
+    scene: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON ``physinfer simulate --json`` prints."""
@@ -50,7 +52,10 @@ class Simulation:
             "params": self.params,
             "effects": list(self.effects),
         }
-        out.update(seed=self.seed, simulate_s=self.seconds.get("simulate"))
+        out["seed"] = self.seed
+        if self.scene is not None:
+            out["scene"] = self.scene
+        out["simulate_s"] = self.seconds.get("simulate")
         out.update(n_frames=self.trajectory.n_frames, fps=self.trajectory.fps)
         if "trajectory" in self.paths:
             out["trajectory"] = self.paths["trajectory"]

@@ -198,6 +198,41 @@ def parse_render_set(items: list[str]) -> dict[str, Any]:
     return out
 
 
+#: CLI parameters named otherwise in the API's options (``physinfer.api.options``).
+CLI_RENAMES = {"effect": "effects", "set_": "set"}
+#: CLI parameters that are not settings of the command.
+CLI_ONLY = frozenset({"plugin", "as_json"})
+
+
+def options_from_cli(kind: type, values: dict[str, Any]) -> Any:
+    """The API's options object ``kind`` from a command's parameters (its ``locals()``).
+
+    Repeated ``NAME=VALUE`` options become dicts (``--render-set``, ``--scene-set``) or
+    tuples; every other parameter is a field of the same name (:data:`CLI_RENAMES` aside),
+    so a CLI option without its field in the API fails at once (tests/core/test_library_api.py).
+    """
+    import dataclasses
+
+    from physinfer.scene import parse_scene_set
+
+    fields = {f.name for f in dataclasses.fields(kind)}
+    settings: dict[str, Any] = {}
+    for name, value in values.items():
+        if name in CLI_ONLY:
+            continue
+        field_name = CLI_RENAMES.get(name, name)
+        if field_name not in fields:
+            raise TypeError(f"the CLI option {name!r} has no field in {kind.__name__}")
+        if field_name == "render_set":
+            value = parse_render_set(value)
+        elif field_name == "scene_set":
+            value = parse_scene_set(value)
+        elif isinstance(value, list):
+            value = tuple(value)
+        settings[field_name] = value
+    return kind(**settings)
+
+
 # --------------------------------------------------------------------------- plugins
 
 
@@ -290,48 +325,15 @@ def simulate_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Run one simulation and render it to a video (and/or save the trajectory)."""
-    from physinfer.parameters import parse_float_assignments
-    from physinfer.session import build_pipeline, naming_effects
+    given = dict(locals())
+    from physinfer import api
 
+    options = options_from_cli(api.SimulateOptions, given)
     if out is None and trajectory_out is None:
         raise UserInputError("nothing to write: give --out VIDEO and/or --trajectory-out FILE.npz")
-    if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
-        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
-    for option, path in (("--out", out), ("--trajectory-out", trajectory_out)):
-        if path is not None and path.is_dir():
-            raise UserInputError(f"{option} {path} is a directory; give a file name")
-    registry, _ = registry_and_infos()
-    from physinfer.scene import parse_scene_set, scene_of
-
-    pipeline = build_pipeline(
-        registry, plugin, effects=effect, embedder="", duration_s=duration, scene_set=parse_scene_set(scene_set)
-    )
-    with naming_effects(registry, plugin, effect, "--set"):  # an effect's parameter: name the effect
-        params = pipeline.simulator.parameter_space.complete(parse_float_assignments(set_))
-    # Check ζ before simulating: a typo should not cost a simulation.
-    zeta = pipeline.renderer.check_render_params(
-        {**pipeline.renderer.default_render_params, **parse_render_set(render_set)}
-    )
-    t0 = time.perf_counter()
-    trajectory = pipeline.simulator.simulate(params, seed=seed)
-    sim_s = time.perf_counter() - t0
-    result: dict[str, Any] = {"plugin": plugin, "params": params, "effects": effect, "seed": seed}
-    if scene_of(pipeline.phenomenon) is not None:
-        result["scene"] = scene_of(pipeline.phenomenon)
-    result.update(simulate_s=sim_s, n_frames=trajectory.n_frames, fps=trajectory.fps)
-    if trajectory_out is not None:
-        trajectory.save(trajectory_out)
-        result["trajectory"] = str(trajectory_out)
-    if out is not None:
-        from physinfer.video import write_video
-
-        t1 = time.perf_counter()
-        clip = pipeline.renderer.render(trajectory, zeta)
-        result["render_s"] = time.perf_counter() - t1
-        write_video(out, clip)
-        result.update(video=str(out), render_params=zeta)
+    sim = api.simulate(plugin, options, render=out is not None)
     if as_json:
-        emit_json(result)
+        emit_json(sim.to_dict())
     else:
         err_console.print(f"wrote {', '.join(str(p) for p in (out, trajectory_out) if p)}")
 
@@ -425,48 +427,10 @@ def refine_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
-    from physinfer.scene import parse_scene_set
-    from physinfer.session import refine
+    given = dict(locals())
+    from physinfer import api
 
-    if resume and out is None:
-        raise UserInputError("--resume needs --out DIR (the run directory to continue)")
-    if out is None:
-        out = Path("runs") / f"{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
-    registry, _ = registry_and_infos()
-    result = refine(
-        registry,
-        plugin=plugin,
-        target_path=target,
-        fps=fps,
-        truth=truth,
-        steps=steps,
-        optimizer=optimizer,
-        embedder=embedder,
-        weights=weights,
-        device=device,
-        effects=effect,
-        model=model,
-        render_set=parse_render_set(render_set),
-        fixed=fix,
-        seed=seed,
-        out=out,
-        resume=resume,
-        overwrite=overwrite,
-        progress=True,
-        noise_samples=noise_samples,
-        seeds_per_trial=seeds_per_trial,
-        floor_samples=floor_samples,
-        select_top=select_top,
-        select_seeds=select_seeds,
-        batch_size=batch_size,
-        workers=workers,
-        scheduler=scheduler,
-        duration_s=duration,
-        embedder_frames=embedder_frames,
-        posterior=posterior,
-        use_posterior=not no_posterior,
-        scene_set=parse_scene_set(scene_set),
-    )
+    result = api.refine(plugin, options_from_cli(api.RefineOptions, given), progress=True)
     summary = result.summary()
     if as_json:
         emit_json(summary)

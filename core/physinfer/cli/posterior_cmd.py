@@ -126,16 +126,12 @@ def infer_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
-    from physinfer.posterior.workflow import infer, summary_lines
-    from physinfer.scene import parse_scene_set
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.app import options_from_cli
+    from physinfer.posterior.workflow import summary_lines
 
-    if out is None:
-        out = Path("runs") / f"infer-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
-    registry, _ = registry_and_infos()
-    report = infer(
-        registry, plugin=plugin, out=out, target_path=target, posterior=posterior, fps=fps, truth=truth,
-        n_samples=samples, seed=seed, device=device, scene_set=parse_scene_set(scene_set),
-    )  # fmt: skip
+    report = api.infer(plugin, options_from_cli(api.InferOptions, given))
     if as_json:
         emit_json(report.to_dict())
         return
@@ -144,7 +140,7 @@ def infer_cmd(
         err_console.print(line, highlight=False)
     for pair in report.correlations[:3]:
         err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
-    err_console.print(f"results in {out}")
+    err_console.print(f"results in {Path(report.paths['posterior']).parent}")
 
 
 
