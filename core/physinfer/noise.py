@@ -23,7 +23,7 @@ import numpy as np
 from physinfer.errors import SimulationFailed
 
 if TYPE_CHECKING:
-    from physinfer.refine import Pipeline
+    from physinfer.evaluation import Pipeline
 
 
 #: Salt of :func:`noise_seeds` unless another is given.
@@ -136,7 +136,7 @@ def measure_noise_floor(
         ValueError: for fewer than two seeds or a ζ list of the wrong length.
         SimulationFailed: when fewer than two re-simulations succeed.
     """
-    from physinfer.refine import simulate_many, squared_distance
+    from physinfer.evaluation import simulate_many, squared_distance
 
     if len(seeds) < 2:
         raise ValueError(f"a noise floor needs at least two seeds, got {len(seeds)}")

@@ -60,8 +60,8 @@ def worker_pipeline(spec: PipelineSpec) -> Any:
     cache: dict[PipelineSpec, Any] = _local.__dict__.setdefault("pipelines", {})
     if spec not in cache:
         from physinfer.datasets.worker import limit_threads
+        from physinfer.pipeline import build_pipeline
         from physinfer.plugins import load_registry
-        from physinfer.session import build_pipeline
 
         if spec.threads is not None:
             limit_threads(spec.threads)
@@ -81,7 +81,7 @@ def simulate_and_render(
     A failing simulation is a property of θ and comes back as its reason; a render error
     is not and raises (in the refinement, through the future).
     """
-    from physinfer.refine import simulate_one
+    from physinfer.evaluation import simulate_one
 
     pipeline = worker_pipeline(spec)
     t0 = time.perf_counter()

@@ -91,8 +91,8 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
         UserInputError: an unknown parameter, render setting or effect; a bad output path.
     """
     from physinfer.parameters import parse_float_assignments
+    from physinfer.pipeline import build_pipeline, naming_effects
     from physinfer.scene import scene_of
-    from physinfer.session import build_pipeline, naming_effects
 
     o = with_settings(SimulateOptions, options, settings)
     effects = as_names(o.effects, "effects")

@@ -74,7 +74,7 @@ def build_embedder(
     device: str | None,
 ) -> Any:
     """The pipeline (simulator, renderer, embedder) of ``plugin`` with the chosen embedder."""
-    from physinfer.session import build_pipeline
+    from physinfer.pipeline import build_pipeline
 
     return build_pipeline(
         registry, plugin, embedder=embedder, weights=weights, device=device, embedder_frames=embedder_frames
@@ -331,7 +331,7 @@ def infer(
         UserInputError: a mismatched or damaged estimator (another scene included), a
             target too short for it, an unreadable video.
     """
-    from physinfer.session import load_target
+    from physinfer.pipeline import load_target
 
     if n_samples < 100:
         raise UserInputError(f"--samples {n_samples}: at least 100 samples are needed for intervals")
