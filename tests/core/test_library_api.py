@@ -61,3 +61,61 @@ def test_refine_matches_the_cli_and_reports_progress(tmp_path, physinfer_cli):
     assert [s[0] for s in seen] == [1, 2, 3, 4, 5] and {s[1] for s in seen} == {5}
     assert seen[-1][2] == pytest.approx(result.best_distance)
     assert isinstance(result.plot(), Figure)
+
+
+def _cli_parameters(*path: str) -> set[str]:
+    """The Python names of a CLI command's parameters (``physinfer refine`` → ``{"steps", ...}``)."""
+    import typer
+
+    from physinfer.cli.app import mounted_app
+
+    command = typer.main.get_command(mounted_app())
+    for word in path:
+        command = command.commands[word]
+    return {param.name for param in command.params}
+
+
+@pytest.mark.parametrize(
+    ("command", "options"),
+    [
+        (("simulate",), pi.SimulateOptions),
+        (("refine",), pi.RefineOptions),
+        (("infer",), pi.InferOptions),
+        (("diagnose",), pi.DiagnoseOptions),
+    ],
+)
+def test_every_cli_option_is_a_field_of_the_commands_options_and_back(command, options):
+    from physinfer.cli.app import CLI_ONLY, CLI_RENAMES
+
+    cli = {CLI_RENAMES.get(name, name) for name in _cli_parameters(*command)} - CLI_ONLY
+    fields = {f.name for f in dataclasses.fields(options)}
+    api_only = {"render"} if options is pi.SimulateOptions else set()  # the CLI renders iff --out
+    assert cli == fields - api_only - _not_yet_on_the_cli(command)
+
+
+def _not_yet_on_the_cli(command: tuple[str, ...]) -> set[str]:
+    """Shared fields a command's CLI does not take (the shared dataclass is wider than it)."""
+    return {
+        ("simulate",): {"embedder", "weights", "device", "fix", "embedder_frames"},
+    }.get(command, set())
+
+
+def test_refine_and_diagnose_declare_their_shared_options_alike():
+    import typer
+
+    from physinfer.cli.app import mounted_app
+
+    commands = typer.main.get_command(mounted_app()).commands
+    helps = {
+        name: {p.name: (p.opts, getattr(p, "help", None)) for p in commands[name].params}
+        for name in ("refine", "diagnose")
+    }
+    shared = [
+        f.name
+        for kind in (pi.ModelOptions, pi.TargetOptions, pi.SearchOptions)
+        for f in dataclasses.fields(kind)
+    ]
+    # What these mean differs by command: the effects tried, the video, the budget, the floor.
+    differ = {"effects", "target", "truth", "steps", "floor_samples"}
+    for name in set(shared) - differ:
+        assert helps["refine"][name] == helps["diagnose"][name], name
