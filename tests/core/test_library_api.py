@@ -119,3 +119,11 @@ def test_refine_and_diagnose_declare_their_shared_options_alike():
     differ = {"effects", "target", "truth", "steps", "floor_samples"}
     for name in set(shared) - differ:
         assert helps["refine"][name] == helps["diagnose"][name], name
+
+
+def test_infer_returns_the_posterior_with_a_corner_figure(tmp_path):
+    report = pi.infer("flag", out=tmp_path / "post", samples=500)
+    assert report.marginals["wind_speed"]["label"] == "identified"
+    assert report.to_dict()["posterior"] == report.marginals
+    fig = report.plot()
+    assert len(fig.axes) >= 4  # at least two parameters: a 2 x 2 corner

@@ -35,11 +35,26 @@ def corner_subset(report: Any) -> list[int]:
 
 
 def corner_plot(report: Any, space: ParameterSpace, path: str | Path, *, title: str = "") -> Path:
-    """Write the corner plot of ``report``'s samples to ``path`` (PNG); truth marked if known."""
+    """Write :func:`corner_figure` to ``path`` (PNG, atomically) and return ``path``."""
     import matplotlib
 
-    matplotlib.use("Agg")
+    matplotlib.use("Agg")  # files only; a notebook calls corner_figure and keeps its backend
     import matplotlib.pyplot as plt
+
+    fig = corner_figure(report, space, title=title)
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def corner_figure(report: Any, space: ParameterSpace, *, title: str = "") -> Any:
+    """The corner plot of ``report``'s samples (a matplotlib figure); truth marked if known.
+
+    Drawn with sbi's ``pairplot``, which draws with pyplot: the figure is also pyplot's
+    current one (close it with ``matplotlib.pyplot.close(fig)`` when drawing many).
+    """
     from sbi.analysis import pairplot
 
     subset = corner_subset(report)
@@ -57,8 +72,4 @@ def corner_plot(report: Any, space: ParameterSpace, path: str | Path, *, title: 
     )  # fmt: skip
     if title:
         fig.suptitle(title, fontsize=9)
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    return path
+    return fig

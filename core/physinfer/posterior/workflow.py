@@ -18,6 +18,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
+from physinfer.parameters import ParameterSpace
 from physinfer.posterior.estimator import (
     NetworkConfig,
     PosteriorEstimator,
@@ -263,6 +264,16 @@ class PosteriorReport:
     paths: dict[str, str] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     scene: dict[str, Any] | None = None
+    space: ParameterSpace | None = field(default=None, repr=False)
+
+    def plot(self, title: str = "") -> Any:
+        """The corner plot of the identified parameters and the strongest correlated pair, in
+        physical units with the truth marked where known (a matplotlib figure; ``corner.png``)."""
+        from physinfer.posterior.figures import corner_figure
+
+        if self.space is None:
+            raise ValueError("this report carries no parameter space to draw in")
+        return corner_figure(self, self.space, title=title)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON ``physinfer infer --json`` prints (and ``posterior.json``)."""
@@ -303,6 +314,7 @@ def posterior_of_clip(
         names=space.names,
         estimator=Path("."),
         seconds={"embed": t1 - t0, "sample": t2 - t1},
+        space=space,
     )
     return report
 
