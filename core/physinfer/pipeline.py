@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from physinfer.conditioning import Conditioning
 from physinfer.errors import PhysinferError, UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.parameters import (
@@ -182,10 +183,13 @@ def load_target(
     truth: Sequence[str],
     render_set: Mapping[str, Any],
     fixed: Sequence[str] = (),
+    conditioning: Conditioning | None = None,
 ) -> Target:
     """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target.
 
     ``fixed``: ``--fix``'s items (their parameters may have a ``--truth`` too).
+    ``conditioning``: how a user's video is framed and its ζ estimated
+    (:mod:`physinfer.conditioning`); ``None``: used as it is, at the default ζ.
     """
     truth_values = parse_float_assignments(truth, "--truth")
     space = full_parameter_space(pipeline, fixed)
@@ -198,6 +202,16 @@ def load_target(
         return Target(target.clip, merged_truth or None, zeta, target.description)
     from physinfer.video import read_target_video
 
-    zeta = pipeline.renderer.check_render_params({**pipeline.renderer.default_render_params, **render_set})
+    defaults = pipeline.renderer.default_render_params
+    pipeline.renderer.check_render_params({**defaults, **render_set})  # a typo costs no framing
     clip = read_target_video(target_path, fps=fps)
-    return Target(clip, truth_values or None, zeta, str(target_path))
+    estimated: dict[str, Any] = {}
+    conditions = None
+    if conditioning is not None:
+        from physinfer.conditioning import condition_target
+
+        clip, estimated, conditions = condition_target(
+            pipeline.phenomenon, pipeline.embedder, clip, conditioning, render_set
+        )
+    zeta = pipeline.renderer.check_render_params({**defaults, **estimated, **render_set})
+    return Target(clip, truth_values or None, zeta, str(target_path), conditions)

@@ -216,12 +216,15 @@ class Target:
         truth: Physical parameter values that produced it, or ``None`` (real footage).
         render_params: The ζ to render simulations with (oracle ζ, as in the paper).
         description: Where the target came from.
+        conditions: How a user's video was conditioned (framing found, ζ estimated; see
+            :mod:`physinfer.conditioning`), or ``None``.
     """
 
     clip: Clip
     truth: dict[str, float] | None = None
     render_params: Mapping[str, Any] = field(default_factory=dict)
     description: str = ""
+    conditions: dict[str, Any] | None = None
 
     @classmethod
     def synthetic(

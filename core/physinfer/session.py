@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.locking import exclusive_directory
 from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's historical API
@@ -110,6 +111,7 @@ def refine(
     posterior: Path | None = None,
     use_posterior: bool = True,
     scene_set: Mapping[str, Any] | None = None,
+    conditioning: Conditioning | None = None,
 ) -> RefineResult:
     """Run or continue a refinement end to end and write every output into ``out``.
 
@@ -128,6 +130,9 @@ def refine(
     ``duration_s``, ``embedder_frames`` and ``scene_set``: see :func:`build_pipeline`; a
     scene is recorded in ``run.json`` (a resume key) and ``result.json`` (``scene``), and a
     posterior estimator trained under another scene is not used (``posterior_note`` says so).
+    ``conditioning``: how a ``target_path`` video is framed and its ζ estimated
+    (:mod:`physinfer.conditioning`; ``None``: used as it is); what was done is recorded in
+    ``result.json`` (``target_conditions``).
     """
     registry.get("optimizers", optimizer)  # fail early, listing the installed ones
     if resume and overwrite:
@@ -166,7 +171,10 @@ def refine(
     )
     config.validate()
     with naming_effects(registry, plugin, effects, "--truth"):
-        target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed)
+        target = load_target(
+            pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed,
+            conditioning=conditioning,
+        )  # fmt: skip
     amortized, amortized_note = None, None
     if use_posterior:
         from physinfer.posterior.workflow import posterior_for_refinement
@@ -236,6 +244,8 @@ def refine(
             result.extra["fixed"] = fixed_values
         if scene is not None:
             result.extra["scene"] = scene
+        if target.conditions:
+            result.extra["target_conditions"] = target.conditions
         if executor is not None:
             result.extra["executor"] = executor
         if amortized is not None:

@@ -28,6 +28,7 @@ from typing import Any
 
 from physinfer.api.options import (
     DiagnoseOptions,
+    FootageOptions,
     InferOptions,
     ModelOptions,
     RefineOptions,
@@ -44,6 +45,7 @@ from physinfer.errors import UserInputError
 __all__ = [
     "DiagnoseOptions",
     "Diagnosis",
+    "FootageOptions",
     "InferOptions",
     "ModelOptions",
     "RefineOptions",
@@ -202,6 +204,7 @@ def refine(
         posterior=_optional(o.posterior),
         use_posterior=not o.no_posterior,
         scene_set=o.scene_set,
+        conditioning=o.conditioning(estimate_render=not o.no_render_estimate),
     )
 
 
@@ -297,4 +300,5 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
         seed=o.seed,
         device=o.device,
         scene_set=o.scene_set,
+        conditioning=o.conditioning(),
     )

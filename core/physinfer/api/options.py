@@ -67,6 +67,36 @@ class TargetOptions:
 
 
 @dataclass(frozen=True)
+class FootageOptions:
+    """How a ``target`` video is framed before it is compared (``refine``, ``infer``;
+    :mod:`physinfer.conditioning`).
+
+    Attributes:
+        no_prepare: Use the video as it is (by default a video that is not square is framed
+            as the renderer frames its subject, steadied and resampled, as ``physinfer
+            prepare`` does).
+        roi: ``"x,y,w,h"`` or four numbers: the region the subject moves in, in the video's
+            pixels, instead of the one found.
+    """
+
+    no_prepare: bool = False
+    roi: str | tuple[float, float, float, float] | None = None
+
+    def conditioning(self, *, estimate_render: bool = False) -> Any:
+        """The :class:`~physinfer.conditioning.Conditioning` these options ask for."""
+        from physinfer.conditioning import Conditioning, parse_roi
+
+        roi = parse_roi(self.roi) if isinstance(self.roi, str) else self.roi
+        if roi is not None and len(roi) != 4:
+            raise UserInputError(f"roi {roi!r}: give x, y, w, h in the video's pixels")
+        return Conditioning(
+            prepare=False if self.no_prepare else None,
+            roi=None if roi is None else tuple(float(v) for v in roi),
+            estimate_render=estimate_render,
+        )
+
+
+@dataclass(frozen=True)
 class SearchOptions:
     """How a refinement searches (shared by ``refine`` and ``diagnose``).
 
@@ -106,7 +136,7 @@ class SimulateOptions(ModelOptions):
 
 
 @dataclass(frozen=True)
-class RefineOptions(ModelOptions, TargetOptions, SearchOptions):
+class RefineOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions):
     """``physinfer refine``.
 
     Attributes:
@@ -120,6 +150,8 @@ class RefineOptions(ModelOptions, TargetOptions, SearchOptions):
         scheduler: A Dask scheduler address for the trials.
         posterior: Posterior estimator file (``None``: the phenomenon's shipped one).
         no_posterior: Use no posterior estimator (a best fit only).
+        no_render_estimate: Render simulations at the default ζ instead of the camera
+            estimated from a ``target`` video (``render_set`` overrides either way).
     """
 
     out: Path | None = None
@@ -132,6 +164,7 @@ class RefineOptions(ModelOptions, TargetOptions, SearchOptions):
     scheduler: str | None = None
     posterior: Path | None = None
     no_posterior: bool = False
+    no_render_estimate: bool = False
 
 
 @dataclass(frozen=True)
@@ -168,7 +201,7 @@ class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
 
 
 @dataclass(frozen=True)
-class InferOptions(TargetOptions):
+class InferOptions(TargetOptions, FootageOptions):
     """``physinfer infer``.
 
     Attributes:

@@ -82,6 +82,18 @@ SceneSetOpt = Annotated[
         "cloth_height (m), fan=W1|W2|W3. A wrong name lists the plugin's.",
     ),
 ]
+NoPrepareOpt = Annotated[
+    bool,
+    typer.Option(
+        "--no-prepare",
+        help="Use --target as it is. By default a video that is not square is framed as the renderer "
+        "frames its subject, steadied and resampled first (as `physinfer prepare` does).",
+    ),
+]
+RoiOpt = Annotated[
+    str | None,
+    typer.Option("--roi", help="x,y,w,h: the region the subject moves in, in --target's pixels (instead of the one found)."),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(
@@ -423,6 +435,16 @@ def refine_cmd(
     ] = None,
     no_posterior: Annotated[
         bool, typer.Option("--no-posterior", help="Use no posterior estimator (a best fit only).")
+    ] = False,
+    no_prepare: NoPrepareOpt = False,
+    roi: RoiOpt = None,
+    no_render_estimate: Annotated[
+        bool,
+        typer.Option(
+            "--no-render-estimate",
+            help="Render simulations at the default camera instead of the one estimated from --target "
+            "(--render-set overrides either way).",
+        ),
     ] = False,
     as_json: JsonOpt = False,
 ) -> None:

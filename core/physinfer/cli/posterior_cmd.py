@@ -16,7 +16,9 @@ import typer
 
 from physinfer.cli.app import (
     JsonOpt,
+    NoPrepareOpt,
     PluginOpt,
+    RoiOpt,
     SceneSetOpt,
     emit_json,
     err_console,
@@ -123,6 +125,8 @@ def infer_cmd(
     ] = None,
     device: DeviceOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
+    no_prepare: NoPrepareOpt = False,
+    roi: RoiOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.parameters import ParameterSpace
@@ -253,6 +254,9 @@ class PosteriorReport:
         truth: Known true values, if any.
         paths: Files written.
         seconds: Time per stage.
+        scene: The target's scene settings, when given.
+        space: The estimator's parameter space (for :meth:`plot`).
+        target_conditions: How a user's video was framed (:mod:`physinfer.conditioning`).
     """
 
     marginals: dict[str, dict[str, Any]]
@@ -265,6 +269,7 @@ class PosteriorReport:
     seconds: dict[str, float] = field(default_factory=dict)
     scene: dict[str, Any] | None = None
     space: ParameterSpace | None = field(default=None, repr=False)
+    target_conditions: dict[str, Any] | None = None
 
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
@@ -287,6 +292,8 @@ class PosteriorReport:
         }
         if self.scene is not None:
             d["scene"] = self.scene
+        if self.target_conditions:
+            d["target_conditions"] = self.target_conditions
         if self.truth:
             d["truth"] = self.truth
             d["truth_in_ci90"] = {
@@ -332,12 +339,15 @@ def infer(
     seed: int = 0,
     device: str | None = None,
     scene_set: Mapping[str, Any] | None = None,
+    conditioning: Conditioning | None = None,
 ) -> PosteriorReport:
     """The posterior of one video (default: the plugin's embedded target), written to ``out``:
     ``posterior.json``, ``samples.npz`` and ``corner.png``.
 
     ``scene_set``: the target's known scene settings (``--scene-set``); an estimator
-    trained on clips of another scene is refused.
+    trained on clips of another scene is refused. ``conditioning``: how a ``target_path``
+    video is framed (:mod:`physinfer.conditioning`; ζ is not estimated: the amortized
+    posterior was trained across ζ); ``None``: used as it is.
 
     Raises:
         UserInputError: a mismatched or damaged estimator (another scene included), a
@@ -357,12 +367,15 @@ def infer(
     estimator, path = load_estimator(registry, plugin, posterior, device)
     estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
-    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set={})
+    if conditioning is not None:
+        conditioning = replace(conditioning, estimate_render=False)
+    target = load_target(pipeline, target_path, fps=fps, truth=truth, render_set={}, conditioning=conditioning)
     t_ready = time.perf_counter()
     report = posterior_of_clip(estimator, pipeline.embedder, target.clip, n_samples=n_samples, seed=seed)
     report.estimator = path
     report.truth = dict(target.truth) if target.truth else None
     report.scene = scene
+    report.target_conditions = target.conditions
     report.seconds["start_up"] = t_ready - t_start
     write_report(report, estimator, out, title=target.description)
     pipeline.renderer.close()

@@ -1,0 +1,119 @@
+"""Condition a user's video for comparison with simulations: frame it as the renderer frames
+its subject (:mod:`physinfer.prepare`) and read the camera's render parameters ζ from it
+(:mod:`physinfer.render_estimate`).
+
+``refine``, ``diagnose`` and ``infer`` run this on every ``--target`` video, so a phone clip
+needs no separate ``physinfer prepare`` step. A square video is taken as framed already
+(the renderer's output and ``prepare``'s are square; footage rarely is) and left as it is;
+``--no-prepare`` leaves any video as it is and ``--roi`` gives the subject's region. The ζ
+estimate fills only the render settings the user did not give with ``--render-set``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from physinfer.errors import UserInputError
+from physinfer.types import Clip
+
+Box = tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class Conditioning:
+    """How a target video is conditioned.
+
+    Attributes:
+        prepare: ``None``: frame a video that is not square (the default); ``True``: frame
+            it whatever its shape; ``False``: use it as it is.
+        roi: ``(x, y, w, h)`` in the video's pixels: the region the subject moves in,
+            instead of the one found.
+        estimate_render: Estimate ζ from the (framed) clip where the phenomenon has an
+            estimator, for the render settings not given.
+    """
+
+    prepare: bool | None = None
+    roi: Box | None = None
+    estimate_render: bool = True
+
+    def wants_prepare(self, clip: Clip) -> bool:
+        """Whether ``clip`` is framed: as asked, else when it is not square (or a roi is given)."""
+        if self.prepare is not None:
+            return self.prepare
+        height, width = clip.size
+        return self.roi is not None or height != width
+
+
+def parse_roi(text: str | None) -> Box | None:
+    """``"x,y,w,h"`` → four floats (checked against the frame when the clip is framed).
+
+    Raises:
+        UserInputError: not four numbers.
+    """
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        raise UserInputError(
+            f"--roi {text!r}: give x,y,w,h as four numbers in the input's pixels, e.g. 100,50,300,300"
+        )
+    return values  # type: ignore[return-value]
+
+
+def frame_clip(phenomenon: Any, embedder: Any, clip: Clip, roi: Box | None) -> tuple[Clip, dict[str, Any]]:
+    """``clip`` framed, steadied and resampled as the embedder reads (:func:`physinfer.prepare.prepare_clip`).
+
+    Returns:
+        The framed clip and what was found (``box``, ``square``, shake, ``warnings``, ...).
+    """
+    from physinfer.prepare import PrepareSettings, default_framing, prepare_clip
+
+    size = int(getattr(embedder, "size", 224)) if embedder is not None else 224
+    fps = float(embedder.fps) if embedder is not None else None
+    settings = PrepareSettings(size=size, fps=fps, roi=roi)
+    prepared = prepare_clip(clip, framing=phenomenon.framing or default_framing, settings=settings)
+    return prepared.clip, prepared.to_dict()
+
+
+def condition_target(
+    phenomenon: Any,
+    embedder: Any,
+    clip: Clip,
+    conditioning: Conditioning,
+    render_set: Mapping[str, Any],
+) -> tuple[Clip, dict[str, Any], dict[str, Any]]:
+    """Frame ``clip`` if wanted and estimate the render settings ``render_set`` leaves open.
+
+    Args:
+        phenomenon: The :class:`~physinfer.roles.Phenomenon` (its framing rule and ζ estimator).
+        embedder: The pipeline's embedder (the framing's size and fps; the ζ read-out), or
+            ``None`` when the command embeds nothing.
+        clip: The video as read.
+        conditioning: What to do.
+        render_set: The user's ``--render-set`` (never overridden).
+
+    Returns:
+        ``(clip, zeta, record)``: the clip to compare with, the estimated ζ values to
+        render with (only keys not in ``render_set``), and what was done for ``result.json``
+        (``prepared``: the framing found or why not; ``render_estimate``: the estimate with
+        its uncertainty, or why none).
+    """
+    record: dict[str, Any] = {}
+    if conditioning.wants_prepare(clip):
+        clip, record["prepared"] = frame_clip(phenomenon, embedder, clip, conditioning.roi)
+    else:
+        why = "--no-prepare" if conditioning.prepare is False else "the video is square: taken as framed already"
+        record["prepared"] = {"skipped": why}
+    zeta: dict[str, Any] = {}
+    if conditioning.estimate_render and embedder is not None:
+        from physinfer.render_estimate import estimate_render_params
+
+        estimate = estimate_render_params(phenomenon, clip, embedder=embedder)
+        zeta = {k: v for k, v in estimate.get("values", {}).items() if k not in render_set}
+        record["render_estimate"] = {**estimate, "used": sorted(zeta)}
+    return clip, zeta, record
