@@ -16,6 +16,7 @@ from typing import Annotated, Any
 import typer
 
 from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
+from physinfer.conditioning import parse_roi
 from physinfer.errors import UserInputError
 
 
@@ -169,18 +170,3 @@ def output_paths(out: Path, target: Path) -> dict[str, Path]:
                 f"--out: writing {path} would overwrite --target; choose another name"
             )
     return paths
-
-
-def parse_roi(text: str | None) -> tuple[float, float, float, float] | None:
-    """``"x,y,w,h"`` → four floats (checked against the frame later)."""
-    if text is None:
-        return None
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != 4:
-        raise UserInputError(
-            f"--roi {text!r}: give x,y,w,h as four numbers in the input's pixels, e.g. 100,50,300,300"
-        )
-    return values  # type: ignore[return-value]
