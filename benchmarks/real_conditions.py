@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from PIL import Image, ImageFilter
+from PIL import Image
 
-from physinfer.types import Clip, Trajectory
+from physinfer.types import Trajectory
 
 
 def _noise_field(
@@ -137,14 +137,3 @@ def h264(frames: np.ndarray, fps: float, crf: int = 35) -> np.ndarray:
             for packet in stream.encode():
                 container.mux(packet)
         return read_video(path).frames
-
-
-def blur(clip: Clip, sigma: float) -> Clip:
-    """Gaussian blur of every frame (a candidate denoiser before embedding)."""
-    frames = np.stack(
-        [
-            np.asarray(Image.fromarray(f).filter(ImageFilter.GaussianBlur(sigma)))
-            for f in clip.frames
-        ]
-    )
-    return Clip(frames, clip.fps)

@@ -17,8 +17,9 @@ compares like with like:
    (:attr:`physinfer.roles.Phenomenon.framing`; :func:`default_framing` otherwise).
 4. **Crop, scale, trim, resample**: every frame is cut at the square moved by its shift
    (sub-pixel, Pillow's bilinear resize with a box), scaled to ``size`` × ``size``, the
-   kept span trimmed, and the frames resampled to ``fps``
-   (:func:`physinfer.video.resample`).
+   kept span trimmed, the static background frozen (noise and compression flicker
+   removed where nothing moves, :mod:`physinfer.static_background`), and the frames
+   resampled to ``fps`` (:func:`physinfer.video.resample`).
 
 Everything is reported in a :class:`PreparedClip` (box and square in the input's pixels,
 per-frame shifts, shake and residual shake in pixels, frames kept, warnings), and
@@ -92,6 +93,9 @@ class PrepareSettings:
         edge_error_fraction: Refuse the clip when the moving region reaches the edge of
             the frame in more than this share of its frames (the subject leaves the
             frame); a smaller share is a warning.
+        freeze_background: Replace the pixels that never change by more than noise and
+            compression flicker with their temporal median, as a renderer draws a static
+            background (:func:`physinfer.static_background.freeze_static`).
     """
 
     size: int = 224
@@ -101,6 +105,7 @@ class PrepareSettings:
     duration_s: float | None = None
     stabilise: bool = True
     edge_error_fraction: float = 0.5
+    freeze_background: bool = True
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad value."""
@@ -149,6 +154,8 @@ class PreparedClip:
         edge_fraction: Share of frames in which the moving region reached the frame's edge.
         contrast: Peak motion energy over the background's median (how clearly the
             subject stands out; 1 = not at all).
+        static: What freezing the static background did (``noise_sigma``, ``level``,
+            ``static_fraction``; empty when it was off).
         warnings: Sentences for the user.
         seconds: Wall time of the whole preparation.
         preview: ``(H, W, 3)`` uint8 reference frame, for :func:`save_overlay`.
@@ -170,6 +177,7 @@ class PreparedClip:
     padded: bool
     edge_fraction: float
     contrast: float
+    static: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     seconds: float = 0.0
     preview: np.ndarray = field(default_factory=lambda: np.zeros((1, 1, 3), np.uint8), repr=False)
@@ -196,6 +204,7 @@ class PreparedClip:
             "padded": self.padded,
             "edge_fraction": round(self.edge_fraction, 3),
             "contrast": round(self.contrast, 2),
+            "static_background": self.static or None,
             "warnings": list(self.warnings),
             "seconds": round(self.seconds, 3),
         }
@@ -283,6 +292,11 @@ def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> Pre
         warnings.append(
             "the framing reaches beyond the frame; the outside was filled with edge pixels"
         )
+    static: dict[str, float] = {}
+    if settings.freeze_background:
+        from physinfer.static_background import freeze_static
+
+        cropped, static = freeze_static(cropped)
     out = Clip(cropped, clip.fps)
     if settings.fps is not None:
         from physinfer.video import resample
@@ -304,6 +318,7 @@ def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> Pre
         padded=padded,
         edge_fraction=float(edge),
         contrast=float(stats["contrast"]),
+        static=static,
         warnings=tuple(warnings),
         seconds=time.perf_counter() - t0,
         preview=frames[reference],

@@ -66,6 +66,14 @@ def prepare_cmd(
     no_stabilise: Annotated[
         bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
     ] = False,
+    no_freeze: Annotated[
+        bool,
+        typer.Option(
+            "--no-freeze-background",
+            help="Keep the noise and compression flicker of pixels that do not move (by default "
+            "they are set to their temporal median, as a renderer draws a static background).",
+        ),
+    ] = False,
     no_render_estimate: Annotated[
         bool,
         typer.Option(
@@ -88,6 +96,7 @@ def prepare_cmd(
         start_s=start,
         duration_s=duration,
         stabilise=not no_stabilise,
+        freeze_background=not no_freeze,
         size=size or 224,
     )
     settings.validate()
