@@ -336,6 +336,14 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert len({run["target_seed"] for run in report["calibration"]}) == 3
     assert report["tested_gap"] == report["gap_before"]
     assert report["settings"]["calibration_runs"] == 3 and report["settings"]["calibration_control"]
+    # The detection limit of every candidate (physinfer.diagnose.limits), cached for the re-run.
+    assert set(cand) >= {"detectable_from", "limit"}
+    assert cand["detectable_from"] is None or set(cand["detectable_from"]) == {"drag_quadratic"}
+    assert (cand["detectable_from"] is None) == (cand["limit"]["reason"] is not None)
+    assert set(cand["limit"]) >= {"fraction", "reason", "mimicked_by", "rungs", "threshold", "reveal"}
+    assert set(report["limits"]) >= {"seeds", "simulations", "diagnosis_simulations", "share", "clip_seconds"}
+    assert report["limits"]["clip_seconds"] == pytest.approx(4.0)  # 100 frames at 25 fps
+    assert (out / "limits.json").is_file() and again["candidates"][0]["limit"] == cand["limit"]
 
 
 def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):

@@ -63,6 +63,8 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     assert report["misspecified"] and report["misspecified_by"] == ["effect"]
     assert report["named_effect"] == "quadratic_drag" and report["candidates"][0]["significant"]
     assert "misspecified True (by an effect's significant improvement)" in " ".join(proc.stderr.split())
+    # One line per candidate with its detection limit on this clip.
+    assert "quadratic_drag: named; this 4-s clip could" in " ".join(proc.stderr.split())
     strict = _run(*args, "--require-gap-test", "--json")
     assert strict.returncode == 0, strict.stderr
     report = json.loads(strict.stdout)

@@ -751,7 +751,9 @@ def _reveal_by_fixing(
         if factor is None or factor <= 1.05:
             continue
         detectable = fixed["detectable_from"]
-        if limit["fraction"] is not None and math.isfinite(factor):
+        if limit["fraction"] is None:
+            factor = math.inf  # not detectable as measured; detectable as predicted with P held
+        elif math.isfinite(factor):
             detectable = _values_for(effect_space, limit["fraction"] / factor)
         out.append(
             {
@@ -846,7 +848,9 @@ def _reveal_by_setting(
             if factor is None or factor <= 1.05:
                 continue
             detectable, measured_here = new["detectable_from"], effects[name]["fraction"]
-            if measured_here is not None and math.isfinite(factor):
+            if measured_here is None:
+                factor = math.inf
+            elif math.isfinite(factor):
                 detectable = _values_for(effect_space, measured_here / factor)
             effects[name]["reveal"].append(
                 {
