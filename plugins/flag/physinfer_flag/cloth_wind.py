@@ -22,7 +22,8 @@ import numpy as np
 from numba import njit
 
 from physinfer.roles import Effect
-from physinfer_flag import cloth_numba  # noqa: F401 - picks numba's cache directory first
+from physinfer_flag import cloth_numba
+from physinfer_flag.cloth_numba import FASTMATH, cache_depends_on  # first: numba's cache directory
 
 #: Default spacing of wind samples in seconds (fine enough for gusts of a few Hz).
 WIND_SAMPLE_DT = 0.01
@@ -132,7 +133,7 @@ def _row(state: WindState) -> tuple[float, float, float, float]:  # WIND_COLUMNS
     return (state.speed, state.yaw, state.shear_exponent, state.inclination)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def wind_at_time(table: np.ndarray, sample_dt: float, t: float) -> tuple[float, float, float, float]:
     """Speed, yaw, shear exponent and inclination at time ``t``, interpolating ``table`` ``(K, 4)``."""
     n = table.shape[0]
@@ -151,9 +152,12 @@ def wind_at_time(table: np.ndarray, sample_dt: float, t: float) -> tuple[float, 
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def shear_factor(z: float, exponent: float, z_ref: float) -> float:
     """Speed factor ``(z / z_ref)^exponent`` of a power-law profile (1 when the exponent is 0)."""
     if exponent == 0.0:
         return 1.0
     return (max(z, MIN_SHEAR_HEIGHT) / z_ref) ** exponent
+
+
+cache_depends_on((wind_at_time, shear_factor), cloth_numba)
