@@ -47,7 +47,13 @@ from physinfer.render_estimate import estimate_render_params  # noqa: E402
 from physinfer.roles import Target  # noqa: E402
 from physinfer.session import build_pipeline  # noqa: E402
 
-ARMS = ("oracle ζ, clean", "default ζ, prepared", "estimated ζ, prepared", "estimated ζ, phone")
+ARMS = {
+    "oracle": "oracle ζ, clean",
+    "default": "default ζ, prepared",
+    "estimated": "estimated ζ, prepared",
+    "phone": "estimated ζ, phone",
+}
+"""``--arms`` keys and the labels of the rows."""
 
 
 def arm_target(
@@ -92,7 +98,7 @@ def refine_args(steps: int) -> argparse.Namespace:
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out = {}
-    for arm in ARMS:
+    for arm in ARMS.values():
         mine = [r for r in rows if r["arm"] == arm]
         if not mine:
             continue
@@ -123,14 +129,15 @@ def main() -> None:
     parser.add_argument("--targets", type=int, default=4)
     parser.add_argument("--steps", type=int, default=16)
     parser.add_argument(
-        "--arms", default=",".join(ARMS), help="comma-separated subset of: " + ", ".join(ARMS)
+        "--arms", default=",".join(ARMS), help="comma-separated: " + ", ".join(ARMS)
     )
     parser.add_argument("--out", type=Path, default=Path("runs/bench_real_conditions_refine"))
     args = parser.parse_args()
-    arms = [a.strip() for a in args.arms.split(",")]
-    unknown = set(arms) - set(ARMS)
+    keys = [a.strip() for a in args.arms.split(",")]
+    unknown = set(keys) - set(ARMS)
     if unknown:
-        raise SystemExit(f"--arms: unknown {sorted(unknown)}; choose from {ARMS}")
+        raise SystemExit(f"--arms: unknown {sorted(unknown)}; choose from {', '.join(ARMS)}")
+    arms = [ARMS[k] for k in keys]
     args.out.mkdir(parents=True, exist_ok=True)
     log = args.out / "results.jsonl"
     rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
@@ -144,10 +151,10 @@ def main() -> None:
             continue
         target = brc.make_target(pipeline.phenomenon, pipeline.renderer, index)
         makers = brc.conditions(target, pipeline.renderer, seed=brc.THETA_SEED + index)
-        clips = {
-            name: makers[name]()[0]
-            for name in ("clean (oracle framing)", "clean → prepare", "phone (all, 1080p 30 fps)")
-        }
+        needed = {"clean (oracle framing)", "clean → prepare"}
+        if ARMS["phone"] in todo:
+            needed.add("phone (all, 1080p 30 fps)")
+        clips = {name: makers[name]()[0] for name in needed}
         for arm in todo:
             refine_target, estimate = arm_target(arm, target, pipeline, clips)
             out = (
