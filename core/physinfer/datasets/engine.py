@@ -1,46 +1,54 @@
 """The generation engine: plan, skip what is complete, run the rest on an executor.
 
-One code path serves every executor: a :class:`concurrent.futures.Executor` runs
-:func:`~physinfer.datasets.worker.run_unit` per unit. ``workers=0`` runs in this process
-(:class:`InlineExecutor`), ``workers=K`` in ``K`` spawned local processes, and a Dask
-scheduler address through ``distributed.Client.get_executor()``. Re-running on the same
-directory resumes: units whose record and files are intact are skipped, damaged ones
-(missing, truncated, checksum mismatch) are deleted and generated again.
+One code path serves every executor: a :class:`concurrent.futures.Executor` (see
+:mod:`physinfer.datasets.executors`) runs :func:`~physinfer.datasets.worker.run_unit` per
+unit, in a bounded window, and this process writes each unit's record as it completes.
+Re-running on the same directory resumes (:mod:`physinfer.datasets.resume`): units whose
+record and files are intact are skipped, damaged ones are generated again. The executor
+and resume names are re-exported here.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
-import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+from physinfer.datasets.executors import (
+    ExecutorInfo,
+    InlineExecutor,
+    default_workers,
+    open_executor,
+)
 from physinfer.datasets.generator import DatasetGenerator
 from physinfer.datasets.plan import UnitPlan, plan_dataset
 from physinfer.datasets.presets import SPLITS, DatasetPreset
+from physinfer.datasets.resume import (
+    check_directory,
+    dataset_config,
+    finish_dataset,
+    resume_state,
+    start_dataset,
+)
 from physinfer.datasets.storage import (
-    DATASET_FILE,
-    FORMAT_NAME,
-    FORMAT_VERSION,
     directory_bytes,
-    read_json,
     remove_stale_temporaries,
-    remove_unit_files,
-    unit_problems,
-    unit_record_path,
     write_manifest,
     write_unit_record,
 )
-from physinfer.datasets.worker import UnitJob, run_unit, start_worker
-from physinfer.errors import PhysinferError, UserInputError
-from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
-from physinfer.locking import LOCK_FILE, exclusive_directory
+from physinfer.datasets.worker import UnitJob, run_unit
+from physinfer.errors import PhysinferError
+from physinfer.io import to_jsonable
+from physinfer.locking import exclusive_directory
+
+__all__ = [
+    "ExecutorInfo", "GenerateProgress", "GenerateResult", "InlineExecutor", "dataset_config", "default_workers",
+    "generate_dataset", "open_executor",
+]
 
 
 class GenerateProgress(Protocol):
@@ -51,108 +59,6 @@ class GenerateProgress(Protocol):
 
     def advance(self, n: int) -> None:
         """``n`` more units verified or renders written."""
-
-
-class InlineExecutor(Executor):
-    """An executor that runs each call at once in this process (``--workers 0``, debugging)."""
-
-    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Future:
-        """Run ``fn(*args, **kwargs)`` now; return a finished future."""
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except Exception as exc:
-            future.set_exception(exc)
-        return future
-
-
-@dataclass(frozen=True)
-class ExecutorInfo:
-    """What ran the units.
-
-    Attributes:
-        kind: ``"inline"``, ``"processes"``, ``"dask"``, ``"none"`` (nothing left to run) or
-            the class name of an executor passed in.
-        workers: Worker processes (Dask: workers known to the scheduler at start).
-        threads: Thread cap per worker for numerical libraries (``None``: untouched).
-        address: The Dask scheduler address, if any.
-    """
-
-    kind: str
-    workers: int
-    threads: int | None
-    address: str | None = None
-
-
-def default_workers() -> int:
-    """Worker processes used when none are asked for: the CPUs this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-@contextmanager
-def open_executor(
-    *, workers: int | None = None, scheduler: str | None = None, threads_per_worker: int = 1
-) -> Iterator[tuple[Executor, ExecutorInfo]]:
-    """An executor for the units, closed on exit.
-
-    Args:
-        workers: Local worker processes; 0 runs in this process; ``None`` uses
-            :func:`default_workers`. Ignored with ``scheduler``.
-        scheduler: Address of a Dask scheduler (``tcp://host:8786``); its workers must
-            have physinfer and the plugin installed and see the output directory.
-        threads_per_worker: Thread cap per worker process for numerical libraries.
-
-    Raises:
-        UserInputError: for a negative worker count or an unreachable scheduler.
-    """
-    if scheduler:
-        yield from _dask_executor(scheduler, threads_per_worker)
-        return
-    workers = default_workers() if workers is None else workers
-    if workers < 0:
-        raise UserInputError(f"--workers must be 0 (in this process) or more, got {workers}")
-    if workers == 0:
-        yield InlineExecutor(), ExecutorInfo("inline", 1, None)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    # spawn, not fork: EGL contexts and torch's thread pools do not survive a fork. The
-    # workers die with this process, even when it is killed (start_worker).
-    pool = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=start_worker,
-        initargs=(threads_per_worker, os.getpid()),
-    )
-    try:
-        yield pool, ExecutorInfo("processes", workers, threads_per_worker)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _dask_executor(address: str, threads_per_worker: int) -> Iterator[tuple[Executor, ExecutorInfo]]:
-    try:
-        from distributed import Client
-    except ImportError:
-        raise UserInputError("--scheduler needs Dask: pip install 'dask[distributed]'") from None
-    try:
-        client = Client(address, timeout="20s")
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise UserInputError(
-            f"cannot reach the Dask scheduler at {address!r} ({type(exc).__name__}: {exc}); "
-            "start one with `dask scheduler` and workers with `dask worker ADDRESS`"
-        ) from None
-    try:
-        n_workers = len(client.scheduler_info().get("workers", {}))
-        executor = client.get_executor(pure=False)
-        yield executor, ExecutorInfo("dask", n_workers, threads_per_worker, address)
-        executor.shutdown(wait=False)
-    finally:
-        client.close()
 
 
 @dataclass
@@ -227,29 +133,6 @@ class GenerateResult:
         )
 
 
-def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int) -> dict[str, Any]:
-    """What determines a dataset's content; a resumed run must match it exactly.
-
-    ``scene`` (``dataset generate --scene-set``) is recorded only when one was given, so
-    datasets made before scenes existed still resume.
-    """
-    from physinfer.scene import scene_of
-
-    described = preset.to_dict()
-    described.pop("description")
-    config: dict[str, Any] = {
-        "phenomenon": generator.phenomenon,
-        "generator": f"{type(generator).__module__}.{type(generator).__qualname__}",
-        "seed": seed,
-        "preset": described,
-        "parameters": generator.parameter_space.to_dict(),
-    }
-    scene = scene_of(getattr(generator, "record", None))
-    if scene is not None:
-        config["scene"] = scene
-    return json.loads(json.dumps(to_jsonable(config)))
-
-
 def generate_dataset(
     generator: DatasetGenerator,
     root: str | Path,
@@ -290,13 +173,13 @@ def generate_dataset(
     """
     t0 = time.perf_counter()
     root = Path(root).expanduser().resolve()
-    _check_directory(root)
+    check_directory(root)
     with exclusive_directory(root):
         config = dataset_config(generator, preset, seed)
-        _start_dataset(root, config)
+        start_dataset(root, config)
         remove_stale_temporaries(root)
         units = plan_dataset(generator, preset, seed)
-        records, todo, regenerated = _resume_state(root, units, verify=verify, progress=progress)
+        records, todo, regenerated = resume_state(root, units, verify=verify, progress=progress)
         if not todo:  # nothing to run: start no processes and contact no scheduler
             info = ExecutorInfo("none", 0, None)
             new_records = _run_units(generator, root, preset, seed, todo, InlineExecutor(), info, progress, units)
@@ -312,89 +195,10 @@ def generate_dataset(
         all_records = [records[u.unit] for u in units]
         write_manifest(root, all_records)
         result = _result(root, generator, preset, seed, info, units, all_records, new_records, regenerated)
-        _finish_dataset(root, config, result)
+        finish_dataset(root, config, result.renders, result.failed_sims)
         result.seconds = time.perf_counter() - t0
         result.bytes = directory_bytes(root)
         return result
-
-
-def _check_directory(root: Path) -> None:
-    check_output_dir(root)
-    if root.is_dir() and not (root / DATASET_FILE).exists():
-        others = [p.name for p in root.iterdir() if p.name != LOCK_FILE]
-        if others:
-            raise UserInputError(
-                f"--out {root} is not empty and holds no dataset ({', '.join(sorted(others)[:3])}...); "
-                "give a new or empty directory"
-            )
-
-
-def _start_dataset(root: Path, config: dict[str, Any]) -> None:
-    path = root / DATASET_FILE
-    if path.exists():
-        existing = read_json(path)
-        if not isinstance(existing, dict) or existing.get("format") != FORMAT_NAME:
-            raise UserInputError(f"{path} is not a physinfer dataset description; give another --out")
-        if existing.get("config") != config:
-            diff = _config_difference(existing.get("config") or {}, config)
-            raise UserInputError(
-                f"{root} holds a different dataset ({diff}); resume it with the same options, "
-                "or give another --out"
-            )
-        if existing.get("status") == "incomplete":
-            return
-    atomic_write_json(
-        path, {"format": FORMAT_NAME, "version": FORMAT_VERSION, "config": config, "status": "incomplete"}
-    )
-
-
-def _config_difference(old: Mapping[str, Any], new: Mapping[str, Any], prefix: str = "") -> str:
-    diffs: list[str] = []
-    for key in sorted(set(old) | set(new)):
-        a, b = old.get(key), new.get(key)
-        if a == b:
-            continue
-        if isinstance(a, dict) and isinstance(b, dict):
-            diffs.append(_config_difference(a, b, f"{prefix}{key}."))
-        else:
-            diffs.append(f"{prefix}{key}: {json.dumps(a)} there, {json.dumps(b)} now")
-    return "; ".join(d for d in diffs if d)
-
-
-def _resume_state(
-    root: Path, units: list[UnitPlan], *, verify: bool, progress: GenerateProgress | None
-) -> tuple[dict[int, dict[str, Any]], list[UnitPlan], int]:
-    """Records of intact units, the units still to run and how many were damaged."""
-    records: dict[int, dict[str, Any]] = {}
-    todo: list[UnitPlan] = []
-    regenerated = 0
-    recorded = {u.unit for u in units if unit_record_path(root, u.unit).exists()}
-    if progress is not None and recorded:
-        progress.start("verify", len(recorded))
-    for unit in units:
-        record = read_json(unit_record_path(root, unit.unit)) if unit.unit in recorded else None
-        if unit.unit not in recorded:
-            todo.append(unit)
-            continue
-        if _intact(root, unit, record, verify=verify):
-            records[unit.unit] = record
-        else:
-            if isinstance(record, dict) and "shard" in record:
-                remove_unit_files(root, record)
-            unit_record_path(root, unit.unit).unlink(missing_ok=True)
-            regenerated += 1
-            todo.append(unit)
-        if progress is not None:
-            progress.advance(1)
-    return records, todo, regenerated
-
-
-def _intact(root: Path, unit: UnitPlan, record: Any, *, verify: bool) -> bool:
-    """Whether a unit's record is readable, belongs to this plan and its files are intact."""
-    try:
-        return record["sims"] == [s.sim for s in unit.sims] and not unit_problems(root, record, verify=verify)
-    except (TypeError, KeyError):  # an unreadable or foreign record
-        return False
 
 
 def _run_units(
@@ -496,19 +300,4 @@ def _result(
         renders_generated=sum(len(r["rows"]) for r in new_records.values()),
         failed_sims=[f for record in records for f in record["failed"]],
         worker_seconds=worker_seconds,
-    )
-
-
-def _finish_dataset(root: Path, config: dict[str, Any], result: GenerateResult) -> None:
-    """Mark the dataset complete, with its final counts (deterministic content only)."""
-    atomic_write_json(
-        root / DATASET_FILE,
-        {
-            "format": FORMAT_NAME,
-            "version": FORMAT_VERSION,
-            "config": config,
-            "status": "complete",
-            "renders": result.renders,
-            "failed_sims": [f["sim"] for f in result.failed_sims],
-        },
     )

@@ -1,0 +1,122 @@
+"""Executors that run a dataset's work units: in this process, in local processes, on Dask.
+
+:func:`open_executor` opens one :class:`concurrent.futures.Executor` for
+:func:`~physinfer.datasets.engine.generate_dataset`: ``workers=0`` runs in this process
+(:class:`InlineExecutor`), ``workers=K`` in ``K`` spawned local processes, and a Dask
+scheduler address through ``distributed.Client.get_executor()``. :class:`ExecutorInfo`
+records which ran the units.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from concurrent.futures import Executor, Future
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from physinfer.datasets.worker import start_worker
+from physinfer.errors import UserInputError
+
+
+class InlineExecutor(Executor):
+    """An executor that runs each call at once in this process (``--workers 0``, debugging)."""
+
+    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Future:
+        """Run ``fn(*args, **kwargs)`` now; return a finished future."""
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except Exception as exc:
+            future.set_exception(exc)
+        return future
+
+
+@dataclass(frozen=True)
+class ExecutorInfo:
+    """What ran the units.
+
+    Attributes:
+        kind: ``"inline"``, ``"processes"``, ``"dask"``, ``"none"`` (nothing left to run) or
+            the class name of an executor passed in.
+        workers: Worker processes (Dask: workers known to the scheduler at start).
+        threads: Thread cap per worker for numerical libraries (``None``: untouched).
+        address: The Dask scheduler address, if any.
+    """
+
+    kind: str
+    workers: int
+    threads: int | None
+    address: str | None = None
+
+
+def default_workers() -> int:
+    """Worker processes used when none are asked for: the CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextmanager
+def open_executor(
+    *, workers: int | None = None, scheduler: str | None = None, threads_per_worker: int = 1
+) -> Iterator[tuple[Executor, ExecutorInfo]]:
+    """An executor for the units, closed on exit.
+
+    Args:
+        workers: Local worker processes; 0 runs in this process; ``None`` uses
+            :func:`default_workers`. Ignored with ``scheduler``.
+        scheduler: Address of a Dask scheduler (``tcp://host:8786``); its workers must
+            have physinfer and the plugin installed and see the output directory.
+        threads_per_worker: Thread cap per worker process for numerical libraries.
+
+    Raises:
+        UserInputError: for a negative worker count or an unreachable scheduler.
+    """
+    if scheduler:
+        yield from _dask_executor(scheduler, threads_per_worker)
+        return
+    workers = default_workers() if workers is None else workers
+    if workers < 0:
+        raise UserInputError(f"--workers must be 0 (in this process) or more, got {workers}")
+    if workers == 0:
+        yield InlineExecutor(), ExecutorInfo("inline", 1, None)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # spawn, not fork: EGL contexts and torch's thread pools do not survive a fork. The
+    # workers die with this process, even when it is killed (start_worker).
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=start_worker,
+        initargs=(threads_per_worker, os.getpid()),
+    )
+    try:
+        yield pool, ExecutorInfo("processes", workers, threads_per_worker)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask_executor(address: str, threads_per_worker: int) -> Iterator[tuple[Executor, ExecutorInfo]]:
+    try:
+        from distributed import Client
+    except ImportError:
+        raise UserInputError("--scheduler needs Dask: pip install 'dask[distributed]'") from None
+    try:
+        client = Client(address, timeout="20s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise UserInputError(
+            f"cannot reach the Dask scheduler at {address!r} ({type(exc).__name__}: {exc}); "
+            "start one with `dask scheduler` and workers with `dask worker ADDRESS`"
+        ) from None
+    try:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        executor = client.get_executor(pure=False)
+        yield executor, ExecutorInfo("dask", n_workers, threads_per_worker, address)
+        executor.shutdown(wait=False)
+    finally:
+        client.close()
