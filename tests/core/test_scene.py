@@ -163,3 +163,10 @@ def test_run_json_records_the_scene_and_a_resume_with_another_is_refused(registr
     stored = json.loads((out / "run.json").read_text())
     same = resolve_scene(registry.phenomenon("flag"), {"flag_height": 0.3, "flag_length": 0.5})
     assert resume_differences(stored, {**stored, "scene": same}) == []
+
+
+def test_plugins_json_lists_each_phenomenons_scene_settings(physinfer_cli):
+    listed = physinfer_cli("plugins", "--json").json()["scene_settings"]
+    flag = {s["name"]: s for s in listed["flag"]}
+    assert flag["pinning"]["choices"] == ["hoist", "corners"] and flag["flag_length"]["unit"] == "m"
+    assert listed["pendulum"] == []

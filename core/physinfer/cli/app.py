@@ -79,7 +79,8 @@ SceneSetOpt = Annotated[
         "--scene-set",
         help="A known setting of the scene, not inferred: NAME=VALUE (repeatable). The flag: flag_length, "
         "flag_height, pole_height (m), pinning=hoist|corners; the hanging cloth: cloth_width, "
-        "cloth_height (m), fan=W1|W2|W3. A wrong name lists the plugin's.",
+        "cloth_height (m), fan=W1|W2|W3. A wrong name lists the plugin's; `physinfer plugins --json` lists "
+        "every phenomenon's (scene_settings).",
     ),
 ]
 NoPrepareOpt = Annotated[
@@ -285,7 +286,13 @@ def plugins_cmd(
             status = _plugin_status(r["error"], r["unresolved"])
             err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
     if as_json:
-        emit_json({"plugins": rows, "phenomena": sorted(registry.entries["phenomena"])})
+        emit_json(
+            {
+                "plugins": rows,
+                "phenomena": sorted(registry.entries["phenomena"]),
+                "scene_settings": _scene_settings(registry),
+            }
+        )
         return
     from rich.table import Table
 
@@ -307,6 +314,21 @@ def plugins_cmd(
         for name, info in infos.items():
             if info.traceback:
                 err_console.print(f"[bold]{name}[/]\n{info.traceback}", highlight=False)
+
+
+def _scene_settings(registry: Any) -> dict[str, list[dict[str, Any]]]:
+    """Each loadable phenomenon's scene settings (``--scene-set``), as JSON; broken ones are
+    reported in the plugin rows instead."""
+    from physinfer.scene import scene_settings_of
+
+    out: dict[str, list[dict[str, Any]]] = {}
+    for name in sorted(registry.entries["phenomena"]):
+        try:
+            phenomenon = registry.phenomenon(name)
+        except Exception:  # noqa: BLE001 - a broken plugin shows in its row
+            continue
+        out[name] = [setting.to_dict() for setting in scene_settings_of(phenomenon).values()]
+    return out
 
 
 def _plugin_status(error: str | None, unresolved: dict[str, str]) -> str:
