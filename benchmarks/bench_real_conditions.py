@@ -130,6 +130,8 @@ def conditions(
     }
 
 
+CLEAN = "clean (oracle framing)"
+
 UNFROZEN = " (no freeze)"
 """Suffix of a prepared condition measured without freezing the static background
 (``prepare --no-freeze-background``): what the fix in prepare changes."""
@@ -215,6 +217,13 @@ def run_target(index: int, ctx: dict[str, Any], quick: bool) -> list[dict[str, A
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per condition; ``median_moved`` is the paired statistic: how far the posterior median
+    moved from the same target's clean one (m/s), free of how hard each target is."""
+    clean = {
+        r["target"]: r["wind_median"]
+        for r in rows
+        if r["condition"] == CLEAN and "wind_median" in r
+    }
     out: dict[str, dict[str, Any]] = {}
     for name in dict.fromkeys(r["condition"] for r in rows):
         done = [r for r in rows if r["condition"] == name and "wind_error" in r]
@@ -235,23 +244,35 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             "median_elevation_error": float(np.median([r["elevation_error"] for r in done])),
             "median_framing_estimate": float(np.median([r["framing_estimate"] for r in done])),
             "median_embedding_shift": float(np.median(shifts)) if shifts else None,
+            "median_moved": float(
+                np.median(
+                    [
+                        abs(r["wind_median"] - clean[r["target"]])
+                        for r in done
+                        if r["target"] in clean
+                    ]
+                )
+            )
+            if any(r["target"] in clean for r in done)
+            else None,
         }
     return out
 
 
 def table(summary: dict[str, dict[str, Any]]) -> str:
     lines = [
-        "| condition | n | median wind error (m/s) | within 0.5 m/s | 90 % coverage | embedding shift |",
-        "|---|---|---|---|---|---|",
+        "| condition | n | median wind error (m/s) | within 0.5 m/s | 90 % coverage "
+        "| moved from clean (m/s) | embedding shift |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, s in summary.items():
         if not s["n"]:
-            lines.append(f"| {name} | 0 ({s['refused']} refused) | – | – | – | – |")
+            lines.append(f"| {name} | 0 ({s['refused']} refused) | – | – | – | – | – |")
             continue
         refused = f" ({s['refused']} refused)" if s["refused"] else ""
         lines.append(
             f"| {name} | {s['n']}{refused} | {s['median_wind_error']:.2f} | {s['within_0.5']:.2f} | "
-            f"{s['coverage90']:.2f} | {s['median_embedding_shift']:.2f} |"
+            f"{s['coverage90']:.2f} | {s['median_moved']:.2f} | {s['median_embedding_shift']:.2f} |"
         )
     return "\n".join(lines)
 
