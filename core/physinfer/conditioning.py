@@ -113,7 +113,10 @@ def condition_target(
     if conditioning.estimate_render and embedder is not None:
         from physinfer.render_estimate import estimate_render_params
 
-        estimate = estimate_render_params(phenomenon, clip, embedder=embedder)
+        try:
+            estimate = estimate_render_params(phenomenon, clip, embedder=embedder)
+        except UserInputError as exc:  # e.g. an estimator of another embedder: ζ is auxiliary here
+            estimate = {"values": {}, "note": f"not estimated: {exc}"}
         zeta = {k: v for k, v in estimate.get("values", {}).items() if k not in render_set}
         record["render_estimate"] = {**estimate, "used": sorted(zeta)}
     return clip, zeta, record

@@ -270,6 +270,8 @@ def diagnose(
         limit_config=LimitConfig(reveal=o.reveal),
     )
     report = run_diagnosis(plugins, diagnose_settings, log=log)
+    if o.scene_set:
+        report["scene"] = plugins.scene
     return Diagnosis.from_report(report, out)
 
 

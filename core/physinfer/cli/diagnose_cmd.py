@@ -1,6 +1,6 @@
 """``physinfer diagnose``: name the effect a refined model is missing, or say none is.
 
-Registered as a command by physinfer's built-in plugin; the work is done by
+Registered as a command by physinfer's built-in plugin; a thin shell over :func:`physinfer.api.diagnose`, which runs
 :func:`physinfer.diagnose.workflow.run_diagnosis`.
 """
 
@@ -25,7 +25,6 @@ from physinfer.cli.app import (
     emit_json,
     err_console,
     handle_errors,
-    parse_render_set,
 )
 
 
@@ -123,57 +122,14 @@ def diagnose_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
-    import time
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.app import options_from_cli
+    from physinfer.diagnose.limits import limit_line
 
-    from physinfer.cli.app import registry_and_infos
-    from physinfer.diagnose.decide import DecisionRule
-    from physinfer.diagnose.limits import LimitConfig, limit_line
-    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
-
-    if out is None:
-        out = Path("runs") / f"diagnose-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
-    registry, _ = registry_and_infos()
-    if scene_set:  # every model of the diagnosis is built from the scene-bound phenomenon
-        from physinfer.scene import SceneRegistry, parse_scene_set
-
-        registry = SceneRegistry(registry, plugin, parse_scene_set(scene_set))
-    settings = DiagnoseSettings(
-        plugin=plugin,
-        out=out,
-        target_path=target,
-        fps=fps,
-        truth=tuple(truth),
-        render_set=parse_render_set(render_set),
-        steps=steps,
-        effect_steps=effect_steps,
-        optimizer=optimizer,
-        embedder=embedder,
-        embedder_frames=embedder_frames,
-        duration_s=duration,
-        fixed=tuple(fix),
-        weights=weights,
-        device=device,
-        seed=seed,
-        effects=tuple(effect),
-        floor_samples=floor_samples,
-        select_top=select_top,
-        select_seeds=select_seeds,
-        batch_size=batch_size,
-        calibrate=calibrate,
-        calibration_runs=calibration_runs,
-        calibration_control=calibration_control,
-        rule=DecisionRule(
-            misspecified_factor=threshold,
-            calibration_summary=calibration_summary,
-            effect_evidence=not require_gap_test,
-        ),
-        videos=not no_video,
-        limits=limits,
-        limit_config=LimitConfig(reveal=reveal),
-    )
-    report = run_diagnosis(registry, settings, log=lambda msg: err_console.print(msg, highlight=False))
-    if scene_set:
-        report["scene"] = registry.scene
+    options = options_from_cli(api.DiagnoseOptions, given)
+    diagnosis = api.diagnose(plugin, options, log=lambda msg: err_console.print(msg, highlight=False))
+    report, out = diagnosis.to_dict(), diagnosis.out
     if as_json:
         emit_json(report)
         return

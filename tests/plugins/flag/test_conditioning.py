@@ -79,3 +79,14 @@ def test_render_set_overrides_the_estimate(wide_video):
     )
     assert name not in told and name not in record["render_estimate"]["used"]
     assert set(told) == set(free) - {name}
+
+
+def test_an_embedder_the_estimator_was_not_fitted_on_leaves_the_default_camera(wide_video):
+    from physinfer.conditioning import Conditioning, condition_target
+    from physinfer.pipeline import build_pipeline
+    from physinfer.video import read_video
+
+    pipeline = build_pipeline(pi.registry(), "flag", embedder="spectral")
+    clip = read_video(wide_video)
+    _, zeta, record = condition_target(pipeline.phenomenon, pipeline.embedder, clip, Conditioning(), {})
+    assert zeta == {} and "not estimated" in record["render_estimate"]["note"]
