@@ -123,7 +123,7 @@ def default_target() -> Target:
 #: and varied cameras (docs/real-videos.md).
 FRAMING_SPAN = (0.98, 1.02)
 FRAMING_OFFSET = (0.23, 0.18)
-#: The renderer's automatic square, in fly lengths (``physinfer_flag.render``'s 2 × 0.68).
+#: The renderer's automatic square, in fly lengths (``physinfer_flag.flag_scene``'s 2 × 0.68).
 FRAMING_SIDE = 1.36
 
 
