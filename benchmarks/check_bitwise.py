@@ -6,9 +6,8 @@ Records SHA-256 hashes of:
   effects switched in (gusts, shear, yaw, inclination) and with both pinnings of the
   scene (``--scene-set pinning=corners``), from ``simulate``;
 * ``batch/*``: ``simulate_batch`` of 3 flags (and ``batch_equals_single``: whether each
-  batched flag equals its single run bitwise — false so far, because the second batch mixes
-  a flag without gusts with flags with gusts, the known case of the strict xfail in
-  ``tests/plugins/flag/test_cloth_reproducible.py``);
+  batched flag equals its single run bitwise — true since each flag of a batch reads only its
+  own wind table; the second batch mixes a flag without gusts with flags with gusts);
 * ``render/*``: rendered frames of 2 flag clips at 2 ζ (the default and a sampled one) and
   of one hanging-cloth clip (it reuses the flag's sheet-rendering helpers);
 * ``dataset/*``: a tiny flag dataset generated through the CLI (manifest, shards and

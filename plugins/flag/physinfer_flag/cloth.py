@@ -237,20 +237,19 @@ class ClothSolver:
         v0 = np.stack([s[1] for s in states])
         inv_mass = np.stack([self.inverse_mass(r.area_weight) for r in runs])
         curves = np.stack([self.hinge_curves(r.bending) for r in runs])
-        n_wind = max(r.wind.table.shape[0] for r in runs)
-        wind = np.empty((batch, n_wind, WIND_COLUMNS))
-        for b, r in enumerate(runs):
-            k = r.wind.table.shape[0]
-            wind[b, :k] = r.wind.table
-            wind[b, k:] = r.wind.table[-1]  # held after the last sample, as in the kernel
+        wind_lengths = np.array([r.wind.table.shape[0] for r in runs], dtype=np.int64)
+        n_wind = int(wind_lengths.max())
+        wind = np.zeros((batch, n_wind, WIND_COLUMNS))
+        for b, r in enumerate(runs):  # each flag reads only its own samples: batch = single runs
+            wind[b, : wind_lengths[b]] = r.wind.table
         wind_scalars = np.stack([r.wind.scalars() for r in runs])
         if len({r.wind.dt for r in runs}) > 1 and n_wind > 1:
             raise UserInputError("all flags of a batch must sample their wind with the same dt")
         out = np.empty((batch, n_frames, m.n_vertices, 3), dtype=np.float32)
         status = run_flag_batch(
             x0, v0, inv_mass, m.faces, m.face_dm_inv, m.face_area, self._samples, m.hinges,
-            m.hinge_faces, self._hinge_curvature, self._hinge_shape, curves, m.edges, m.edge_length, wind, wind_scalars,
-            self._scalars, self.substeps, int(warmup_frames), out,
+            m.hinge_faces, self._hinge_curvature, self._hinge_shape, curves, m.edges, m.edge_length, wind, wind_lengths,
+            wind_scalars, self._scalars, self.substeps, int(warmup_frames), out,
         )
         return out, status
 

@@ -239,6 +239,7 @@ def run_flag_batch(
     edges: np.ndarray,
     edge_length: np.ndarray,
     wind_table: np.ndarray,
+    wind_lengths: np.ndarray,
     wind_scalars: np.ndarray,
     scalars: np.ndarray,
     substeps: int,
@@ -249,7 +250,9 @@ def run_flag_batch(
 
     Args:
         x0, v0: ``(B, V, 3)`` initial states.
-        inv_mass: ``(B, V)``; hinge_curve: ``(B, H, 5)``; wind_table: ``(B, K, 4)``;
+        inv_mass: ``(B, V)``; hinge_curve: ``(B, H, 5)``; wind_table: ``(B, K, 4)``, of
+            which flag ``b`` reads its first ``wind_lengths[b]`` rows (so a flag is simulated
+            as :func:`run_flag` simulates it alone, whatever the batch's longest table);
             wind_scalars: ``(B, 3)`` — the per-flag inputs of :func:`run_flag`.
         out: ``(B, T, V, 3)`` float32 recorded positions.
         Other arguments are shared and as in :func:`run_flag`.
@@ -264,7 +267,8 @@ def run_flag_batch(
         v = v0[b].copy()
         status, frame = run_flag(x, v, inv_mass[b], faces, dm_inv, face_area, samples, hinges,
                                  hinge_faces, hinge_curvature, hinge_shape, hinge_curve[b], edges, edge_length,
-                                 wind_table[b], wind_scalars[b], scalars, substeps, warmup_frames, out[b])
+                                 wind_table[b, : wind_lengths[b]], wind_scalars[b], scalars, substeps, warmup_frames,
+                                 out[b])
         result[b, 0] = status
         result[b, 1] = frame
     return result

@@ -62,12 +62,6 @@ def test_batch_equals_single_runs_with_effects_and_corner_pinning():
         np.testing.assert_array_equal(traj.vertices, sim.simulate(p, seed=seed).vertices)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known: a batch that mixes a flag whose effects are off (a one-sample wind table) with one whose "
-    "effects are on pads the short table with copies of its sample, and interpolating equal samples "
-    "rounds; simulate() keeps the one sample. Remove this mark when run_flag_batch reads each flag's "
-    "own table length."
-))
 def test_batch_equals_single_runs_when_effects_are_off_for_some_flags():
     sim = make_simulator([WindGusts()], **SMALL)
     params = [{"wind_speed": 5.0, "gust_intensity": 0.3}, {"wind_speed": 7.0}]
