@@ -104,13 +104,8 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     from physinfer.session import build_pipeline
     from physinfer.video import write_video
 
-    rng = np.random.default_rng([seed, 2026])
     pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
-    base_space = pipeline.phenomenon.parameter_space  # for flag_lite: without the fixed bending
-    truth = base_space.from_unit(rng.uniform(-BASE_BOX, BASE_BOX, len(base_space)))
-    for name, (lo, hi) in BASE_RANGES.items():
-        if name in truth:
-            truth[name] = float(rng.uniform(lo, hi))
+    truth, rng = base_truth(pipeline.phenomenon.parameter_space, seed)
     if hidden and strength is not None:
         from physinfer.diagnose.limits import strength_path, values_at
 
@@ -128,6 +123,52 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     path.parent.mkdir(parents=True, exist_ok=True)
     write_video(path, clip)
     return truth
+
+
+def base_truth(base_space: Any, seed: int) -> tuple[dict[str, float], np.random.Generator]:
+    """The base θ of case ``seed`` (for flag_lite without the fixed bending) and the generator after it."""
+    rng = np.random.default_rng([seed, 2026])
+    truth = base_space.from_unit(rng.uniform(-BASE_BOX, BASE_BOX, len(base_space)))
+    for name, (lo, hi) in BASE_RANGES.items():
+        if name in truth:
+            truth[name] = float(rng.uniform(lo, hi))
+    return truth, rng
+
+
+def ladder_case(registry: Any, plugin: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """``--ladder-only``: the detection limits at case ``seed``'s true base θ, without a diagnosis.
+
+    The base fit is taken to be perfect (θ̂ = the truth) and the null scale to be
+    ``--null-over-floor`` noise floors (the floor measured here from ``--floor-samples``
+    re-simulations): what a diagnosis' self-consistency runs would measure, read off the
+    stored tables. Cheap enough for the flag, whose full diagnosis costs tens of minutes.
+    """
+    from physinfer.diagnose.candidates import augmented_pipeline
+    from physinfer.diagnose.decide import DecisionRule
+    from physinfer.diagnose.limits import LimitConfig, LimitInputs, detection_limits
+    from physinfer.noise import measure_noise_floor, noise_seeds
+    from physinfer.session import build_pipeline
+
+    t0 = time.perf_counter()
+    base = build_pipeline(registry, plugin, embedder=args.embedder, embedder_frames=args.embedder_frames)
+    theta, _ = base_truth(base.phenomenon.parameter_space, seed)
+    zeta = dict(base.renderer.default_render_params)
+    if args.render_size is not None:
+        zeta[_size_key(zeta)] = args.render_size
+    floor = measure_noise_floor(base, theta, zeta, seeds=noise_seeds(seed + 2, args.floor_samples))
+    effects = args.effects if args.effects is not None else registry.effects_of(base.phenomenon.name)
+    augmented = {e: augmented_pipeline(base, [registry.effect(e, phenomenon=base.phenomenon.name)]) for e in effects}
+    scale = args.null_over_floor * floor.floor
+    inputs = LimitInputs(base=base, augmented=augmented, theta=theta, base_embeddings=floor.embeddings,
+                         render_params=zeta, scale=scale, rule=DecisionRule(), floor_samples=args.floor_samples,
+                         seed=seed, diagnosis_simulations=args.diagnosis_simulations)
+    limits = detection_limits(inputs, LimitConfig(reveal=args.reveal))
+    base.renderer.close()
+    return {"seed": seed, "theta": theta, "floor": floor.floor, "null_scale": scale,
+            "effects": {e: {k: lim[k] for k in ("detectable_from", "fraction", "reason", "reveal", "threshold")}
+                        for e, lim in limits["effects"].items()},
+            **{k: limits[k] for k in ("simulations", "seeds", "clip_seconds", "wall_time_s")},
+            "wall_time_s": time.perf_counter() - t0}
 
 
 def _size_key(zeta: dict[str, Any]) -> str:
@@ -457,6 +498,14 @@ def main() -> None:
                              "strength, the false discoveries at 0 and the per-target limits' prediction")
     parser.add_argument("--strengths", type=float, nargs="*", default=[0.0, 0.25, 0.5, 1.0])
     parser.add_argument("--plot", default=None, help="with --power: write the power curves to this PNG")
+    parser.add_argument("--ladder-only", action="store_true",
+                        help="no diagnosis: each seed's detection limits at its true base θ, the null scale "
+                             "--null-over-floor noise floors (the flag, whose diagnoses do not fit a session)")
+    parser.add_argument("--null-over-floor", type=float, default=2.0)
+    parser.add_argument("--diagnosis-simulations", type=int, default=536,
+                        help="with --ladder-only: the diagnosis' simulations the ladder's budget is a share of "
+                             "(536: the 24-trial flag table's)")
+    parser.add_argument("--reveal", action="store_true", help="with --ladder-only: also another view")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 
@@ -464,6 +513,14 @@ def main() -> None:
     effects = args.effects if args.effects is not None else registry.effects_of(registry.phenomenon(args.plugin).name)
     if args.power:
         run_power(args, registry, effects)
+        return
+    if args.ladder_only:
+        rows = []
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            rows.append(ladder_case(registry, args.plugin, seed, args))
+            print(json.dumps({"seed": seed, **{e: [v["fraction"], v["detectable_from"], v["reason"]]
+                                               for e, v in rows[-1]["effects"].items()}}), file=sys.stderr, flush=True)
+        print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "cases": rows}))
         return
     all_cases = case_list(args, effects)
     start = time.perf_counter()
