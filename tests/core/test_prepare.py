@@ -5,7 +5,6 @@ The flag's own framing on composited flag renders is tested in
 ``tests/plugins/flag/test_prepare.py``.
 """
 
-import functools
 import json
 import subprocess
 import sys
@@ -17,27 +16,13 @@ from PIL import Image
 
 from physinfer.errors import UserInputError
 from physinfer.prepare import PrepareSettings, default_framing, prepare_clip
+from physinfer.testing.footage import textured_background
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video
 
 BIN = Path(sys.executable).parent / "physinfer"
 #: Where the moving patch is in the 640×360 test videos: (x, y, w, h).
 PATCH = (380, 90, 160, 120)
-
-
-@functools.cache
-def texture(height, width, seed):
-    """A static, photo-like background: noise at several scales, gray levels 40-220."""
-    rng = np.random.default_rng(seed)
-    image = np.zeros((height, width, 3), np.float32)
-    for scale in (1, 4, 16, 48):  # coarse noise fields, upsampled smoothly
-        field = rng.normal(size=(height // scale + 2, width // scale + 2, 3)).astype(np.float32)
-        image += scale**0.5 * np.stack(
-            [np.asarray(Image.fromarray(field[..., c]).resize((width, height), Image.Resampling.BICUBIC))
-             for c in range(3)], axis=-1,
-        )  # fmt: skip
-    image = (image - image.min()) / np.ptp(image)
-    return (40 + 180 * image).astype(np.uint8)
 
 
 def patch_video(
@@ -49,7 +34,7 @@ def patch_video(
     """
     height, width = size
     margin = 12
-    background = texture(height + 2 * margin, width + 2 * margin, seed)
+    background = textured_background(height + 2 * margin, width + 2 * margin, seed)
     x, y, w, h = patch
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     rng = np.random.default_rng(seed + 1)

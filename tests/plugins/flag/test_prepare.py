@@ -5,7 +5,6 @@ Tolerance: the square found overlaps the flag render's square with IoU >= 0.8 (m
 0.93-0.96 on seven composites, docs/real-videos.md).
 """
 
-import functools
 import time
 
 import numpy as np
@@ -13,6 +12,7 @@ import pytest
 from PIL import Image
 
 from physinfer.prepare import PrepareSettings, prepare_clip
+from physinfer.testing.footage import textured_background
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video
 from physinfer_flag.phenomenon import make_phenomenon, make_renderer, make_simulator
@@ -32,21 +32,6 @@ def flag_clip():
         renderer.close()
 
 
-@functools.cache
-def texture(height, width, seed):
-    """A static, photo-like background: noise at several scales, gray levels 40-220."""
-    rng = np.random.default_rng(seed)
-    image = np.zeros((height, width, 3), np.float32)
-    for scale in (1, 4, 16, 48):
-        field = rng.normal(size=(height // scale + 2, width // scale + 2, 3)).astype(np.float32)
-        image += scale**0.5 * np.stack(
-            [np.asarray(Image.fromarray(field[..., c]).resize((width, height), Image.Resampling.BICUBIC))
-             for c in range(3)], axis=-1,
-        )  # fmt: skip
-    image = (image - image.min()) / np.ptp(image)
-    return (40 + 180 * image).astype(np.uint8)
-
-
 def composite(flag, path, size, square, seed=0, shifts=None):
     """The flag clip scaled to ``square = (x, y, side)`` in a ``size = (H, W)`` frame, encoded.
 
@@ -55,7 +40,7 @@ def composite(flag, path, size, square, seed=0, shifts=None):
     height, width = size
     x, y, side = square
     margin = 8
-    background = texture(height + 2 * margin, width + 2 * margin, seed)
+    background = textured_background(height + 2 * margin, width + 2 * margin, seed)
     rng = np.random.default_rng(seed)
     shifts = np.zeros((flag.n_frames, 2)) if shifts is None else shifts
     frames = np.empty((flag.n_frames, height, width, 3), np.uint8)
