@@ -344,6 +344,11 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert set(report["limits"]) >= {"seeds", "simulations", "diagnosis_simulations", "share", "clip_seconds"}
     assert report["limits"]["clip_seconds"] == pytest.approx(4.0)  # 100 frames at 25 fps
     assert (out / "limits.json").is_file() and again["candidates"][0]["limit"] == cand["limit"]
+    # The API's result object draws the same gap figure from the report alone.
+    from physinfer.api import Diagnosis
+
+    figure = Diagnosis.from_report(report, out).plot()
+    assert len(figure.axes[0].patches) == 2  # one bar for the baseline, one for the candidate
 
 
 def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):

@@ -127,28 +127,20 @@ class Diagnosis:
         return self.report
 
     def plot(self) -> Any:
-        """Each model's gap to the target against the noise floor (a matplotlib figure)."""
-        from matplotlib.figure import Figure
+        """Each model's distances to the target and its gap against the noise floor, the null
+        scale and the threshold (a matplotlib figure; ``gaps.png`` is the same drawing)."""
+        from physinfer.diagnose.figures import gaps_figure
 
-        labels = ["baseline"] + [c["effect"] for c in self.candidates]
-        gaps = [self.gap_before] + [float(c["gap"]) for c in self.candidates]
-        fig = Figure(figsize=(1.6 + 1.3 * len(labels), 3.4), layout="constrained")
-        ax = fig.subplots()
-        colours = ["C0"] + [
-            "C2" if c["effect"] == self.named_effect else "C7" for c in self.candidates
+        best = self.report["best_baseline"]
+        models = [{"label": "baseline (best)", "gap": best["gap"], "distances": best["to_target"]}]
+        models += [
+            {"label": c["effect"], "gap": c["gap"], "distances": c.get("distances", [])}
+            for c in self.candidates
         ]
-        ax.bar(range(len(labels)), gaps, color=colours, alpha=0.7, width=0.6)
-        for name, style in (("noise_floor", ":"), ("threshold", "-")):
-            if self.report.get(name) is not None:
-                ax.axhline(
-                    float(self.report[name]),
-                    color="C3",
-                    ls=style,
-                    lw=1,
-                    label=name.replace("_", " "),
-                )
-        ax.set_xticks(range(len(labels)), labels, rotation=20, fontsize=8)
-        ax.set_ylabel("gap to the target")
-        ax.set_title(f"named effect: {self.named_effect or 'none'}", fontsize=9)
-        ax.legend(fontsize=7)
-        return fig
+        return gaps_figure(
+            models,
+            floor=self.report["noise_floor"],
+            scale=self.report["null_scale"],
+            threshold=self.report["threshold"],
+            named=self.named_effect,
+        )

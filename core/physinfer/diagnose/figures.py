@@ -90,7 +90,20 @@ def plot_gaps(
     named: str | None,
     path: str | Path,
 ) -> Path:
-    """Draw each model's distances to the target and its gap, with the reference lines.
+    """Write :func:`gaps_figure` to ``path`` (PNG, atomically) and return ``path``."""
+    fig = gaps_figure(models, floor=floor, scale=scale, threshold=threshold, named=named)
+    return _save(fig, Path(path))
+
+
+def gaps_figure(
+    models: Sequence[Mapping[str, Any]],
+    *,
+    floor: float,
+    scale: float,
+    threshold: float,
+    named: str | None,
+) -> Any:
+    """Each model's distances to the target and its gap, with the reference lines.
 
     Args:
         models: Dicts with ``label``, ``gap`` and ``distances`` (the ``K`` re-simulation
@@ -99,10 +112,9 @@ def plot_gaps(
         scale: The null scale (see :mod:`physinfer.diagnose.decide`).
         threshold: The gap test's threshold (a significant effect is evidence too).
         named: Label of the named effect (highlighted), or ``None``.
-        path: PNG to write (atomically).
 
     Returns:
-        ``path``.
+        The matplotlib figure.
     """
     fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(models), 3.6))
     for i, m in enumerate(models):
@@ -121,4 +133,4 @@ def plot_gaps(
     ax.set_title("gap per model (bar: median; dots: re-simulations)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    return _save(fig, Path(path))
+    return fig
