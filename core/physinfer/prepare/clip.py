@@ -1,0 +1,142 @@
+"""The steps of :func:`prepare_clip` in order: trim, analyse, steady, find the moving region,
+frame, crop, freeze the static background, resample."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+from physinfer.prepare.checks import check_not_static, check_roi, check_square, trim_range
+from physinfer.prepare.frames import analysis_frames, crop_square
+from physinfer.prepare.region import edge_fraction, energy_stats, find_moving_box, motion_energy
+from physinfer.prepare.settings import (
+    FramingRule,
+    PreparedClip,
+    PrepareSettings,
+    default_framing,
+)
+from physinfer.prepare.shake import (
+    MIN_SHAKE_RMS_PX,
+    background_weight,
+    estimate_shifts,
+    measure_shake,
+    rms_about_mean,
+    valid_mask,
+)
+from physinfer.types import Clip
+
+
+def prepare_clip(
+    clip: Clip, *, framing: FramingRule | None = None, settings: PrepareSettings | None = None
+) -> PreparedClip:
+    """Find the moving subject, steady the camera, crop to the framing, scale and resample.
+
+    Args:
+        clip: The input video ``(T, H, W, 3)`` uint8 at its fps.
+        framing: The phenomenon's framing rule (:func:`default_framing` when ``None``).
+        settings: See :class:`PrepareSettings`.
+
+    Returns:
+        The prepared clip and what was found (:class:`PreparedClip`).
+
+    Raises:
+        UserInputError: bad settings, a roi outside the frame, a trim that keeps fewer
+            than two frames, a static video, no moving region, a subject that leaves the
+            frame in more than ``edge_error_fraction`` of the frames.
+    """
+    from threadpoolctl import threadpool_limits
+
+    # The analysis is many small matrix products; on a loaded 2-core machine OpenBLAS's
+    # second thread made them 15x slower (13 ms instead of 0.8 ms each).
+    with threadpool_limits(1):
+        return _prepare(clip, framing or default_framing, settings or PrepareSettings())
+
+
+def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> PreparedClip:
+    import time
+
+    t0 = time.perf_counter()
+    settings.validate()
+    height, width = clip.size
+    if settings.roi is not None:
+        check_roi(settings.roi, (height, width))
+    first, stop = trim_range(clip, settings.start_s, settings.duration_s)
+    frames = clip.frames[first:stop]
+    gray, scale = analysis_frames(frames)
+    check_not_static(gray)
+    reference = len(gray) // 2
+
+    roi_a = None if settings.roi is None else tuple(v * scale for v in settings.roi)
+    measured, steadied = np.zeros((len(gray), 2)), None
+    if settings.stabilise:
+        measured, steadied = measure_shake(gray, reference, roi_a, MIN_SHAKE_RMS_PX * scale)
+    shake_rms = rms_about_mean(measured) / scale
+    stabilised = steadied is not None
+    applied = measured if stabilised else np.zeros_like(measured)
+    steady = steadied if steadied is not None else gray
+    valid = valid_mask(gray.shape[1:], applied)
+    if valid.mean() < 0.25:  # a pan, not a shake: too little of the frame stays in view
+        raise UserInputError(
+            f"the camera moves by up to {np.abs(applied).max() / scale:.0f} px: too much to steady (a pan?); "
+            "use footage from a camera held still, or --no-stabilise"
+        )
+    energy = motion_energy(steady)
+    if roi_a is None:
+        box_a, stats = find_moving_box(energy, valid)
+    else:
+        box_a, stats = roi_a, energy_stats(energy, valid)
+    residual = shake_rms
+    if stabilised:
+        weight = background_weight(gray.shape[1:], box_a)
+        residual = rms_about_mean(estimate_shifts(steady, reference, weight)) / scale
+    edge = edge_fraction(steady, valid, box_a, stats["low"]) if roi_a is None else 0.0
+    warnings = []
+    if edge > settings.edge_error_fraction:
+        raise UserInputError(
+            f"the moving region reaches the edge of the frame in {edge:.0%} of the frames: the subject "
+            "leaves the frame, so how the renderer would frame it cannot be found; use footage that shows "
+            "it whole, or give --roi x,y,w,h (input pixels) to frame it yourself"
+        )
+    if edge > 0:
+        warnings.append(f"the moving region reaches the frame's edge in {edge:.0%} of the frames")
+
+    box = settings.roi if settings.roi is not None else tuple(v / scale for v in box_a)
+    square = framing(box)
+    check_square(square)
+    cropped, padded = crop_square(frames, square, applied / scale, settings.size)
+    if padded:
+        warnings.append(
+            "the framing reaches beyond the frame; the outside was filled with edge pixels"
+        )
+    static: dict[str, float] = {}
+    if settings.freeze_background:
+        from physinfer.static_background import freeze_static
+
+        cropped, static = freeze_static(cropped)
+    out = Clip(cropped, clip.fps)
+    if settings.fps is not None:
+        from physinfer.video import resample
+
+        out = resample(out, settings.fps)
+    return PreparedClip(
+        clip=out,
+        box=tuple(float(v) for v in box),  # type: ignore[arg-type]
+        square=tuple(float(v) for v in square),  # type: ignore[arg-type]
+        roi_source="given" if settings.roi is not None else "found",
+        shifts=measured / scale,
+        shake_rms_px=float(shake_rms),
+        residual_rms_px=float(residual),
+        stabilised=bool(stabilised),
+        fps_in=float(clip.fps),
+        fps_out=float(out.fps),
+        frames_kept=(first, stop),
+        input_size=(height, width),
+        padded=padded,
+        edge_fraction=float(edge),
+        contrast=float(stats["contrast"]),
+        static=static,
+        warnings=tuple(warnings),
+        seconds=time.perf_counter() - t0,
+        preview=frames[reference],
+        energy=energy,
+    )
