@@ -1,0 +1,114 @@
+"""What every ``physinfer`` command shares: the plugin registry, JSON output, and the CLI's one
+error path (:func:`handle_errors`).
+
+A user mistake ends with one line on stderr (and ``{"error": ...}`` on stdout with ``--json``)
+and exit status 2; anything else is a bug and ends with one line naming it and the file its
+traceback was saved to (in the system's temporary directory, never in ``--out``), exit status 1.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import typer
+from typer.exceptions import TyperException
+
+from physinfer.console import err_console
+from physinfer.errors import PhysinferError, UserInputError
+
+
+@functools.cache
+def registry_and_infos() -> tuple[Any, Any]:
+    """The registry of all installed plugins, built once per process."""
+    from physinfer.plugins import load_registry
+
+    return load_registry()
+
+
+def emit_json(obj: Any) -> None:
+    """Print one JSON object on stdout."""
+    from physinfer.io import to_jsonable
+
+    sys.stdout.write(json.dumps(to_jsonable(obj), allow_nan=False) + "\n")
+    sys.stdout.flush()
+
+
+#: Exceptions typer uses for control flow (exit codes, usage errors): never internal errors.
+_TYPER_FLOW = (typer.Exit, typer.Abort, TyperException)
+#: Sub-folder of the system's temporary directory that holds saved tracebacks.
+TRACEBACK_DIR = "physinfer-errors"
+
+
+def handle_errors(
+    as_json_param: str = "as_json",
+    interrupted: str = "interrupted; completed trials are saved — continue with --resume",
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Give a command the one error path of the CLI.
+
+    A user error (:class:`UserInputError`, :class:`PhysinferError`) is one clear line and
+    exit status 2; any other exception is one line naming it and a saved traceback, exit
+    status 1 (:func:`report_internal_error`). With ``--json`` either prints one
+    ``{"error": ...}`` object on stdout.
+
+    Args:
+        as_json_param: The command's keyword argument that is ``--json``.
+        interrupted: What to say on Ctrl-C (exit status 130).
+    """
+
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(func)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            as_json = bool(kwargs.get(as_json_param))
+            try:
+                return func(*args, **kwargs)
+            except (UserInputError, PhysinferError) as exc:
+                err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+                if as_json:
+                    emit_json({"error": str(exc)})
+                raise typer.Exit(2) from None
+            except KeyboardInterrupt:
+                err_console.print(interrupted, highlight=False)
+                raise typer.Exit(130) from None
+            except _TYPER_FLOW:
+                raise
+            except Exception as exc:  # a bug: one line and a saved traceback, not a raw dump
+                report_internal_error(exc, as_json=as_json)
+                raise typer.Exit(1) from None
+
+        return wrapper
+
+    return decorate
+
+
+def report_internal_error(exc: BaseException, *, as_json: bool) -> None:
+    """Say ``error: internal error (ExcType: msg); traceback saved to PATH`` on one line.
+
+    The traceback goes to ``<temp dir>/physinfer-errors/`` (``$TMPDIR`` or the system's), a
+    place every command may write and none of them reads; with ``as_json`` the same message
+    and the path are printed as one JSON object on stdout.
+    """
+    import traceback
+
+    text = " ".join(str(exc).split())
+    summary = f"{type(exc).__name__}: {text[:300]}" if text else type(exc).__name__
+    path: Path | None = None
+    try:
+        folder = Path(tempfile.gettempdir()) / TRACEBACK_DIR
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"traceback-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.txt"
+        path.write_text("".join(traceback.format_exception(exc)))
+        where = f"traceback saved to {path}"
+    except OSError as write_error:
+        where = f"the traceback could not be saved ({write_error.strerror or write_error})"
+    message = f"internal error ({summary}); {where}"
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    if as_json:
+        emit_json({"error": message, "traceback": str(path) if path else None})
