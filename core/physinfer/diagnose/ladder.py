@@ -1,0 +1,152 @@
+"""The detection-limit ladder: an effect switched on at a few strengths at θ̂, and its distances.
+
+Part of :mod:`physinfer.diagnose.limits` (the method is described there). This module only
+measures: which effect parameters a ladder moves (:func:`strength_path`), simulating and
+embedding at the target's ζ (:class:`Probe`), the rungs themselves (:func:`run_ladder`) and
+the two distance summaries every decision reads — the median distance between two sets of
+clips (:func:`cross_median`) and within one (:func:`pairwise_median`, a noise floor).
+
+Multi-parameter effects: the ladder moves the parameters whose *off* value lies on a bound
+(magnitudes, e.g. a gust intensity) and holds those with an interior default at it (shapes,
+e.g. the gusts' time scale, 1 s); when none lies on a bound, all move.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from physinfer.parameters import ParameterSpace
+from physinfer.refine import Pipeline, simulate_many, squared_distance
+
+
+def strength_path(space: ParameterSpace) -> tuple[dict[str, tuple[float, float]], dict[str, float]]:
+    """Which parameters a ladder moves, from where to where (normalised), and which it holds.
+
+    Returns:
+        ``moved`` (name → (off, on) in ``[-1, 1]``: off is the declared default or the low
+        bound, on the bound farthest from it) and ``held`` (name → physical off value).
+    """
+    ends = {}
+    for spec in space:
+        off = float(spec.default) if spec.default is not None else float(spec.bounds[0])
+        u_off = float(spec.to_unit(off))
+        ends[spec.name] = (u_off, -1.0 if u_off > 0 else 1.0, off)
+    on_bound = [n for n, (u, _, _) in ends.items() if abs(abs(u) - 1.0) < 1e-9]
+    moving = on_bound or list(ends)
+    moved = {n: (ends[n][0], ends[n][1]) for n in moving}
+    held = {n: ends[n][2] for n in ends if n not in moving}
+    return moved, held
+
+
+def values_at(
+    space: ParameterSpace,
+    moved: Mapping[str, tuple[float, float]],
+    held: Mapping[str, float],
+    fraction: float,
+) -> dict[str, float]:
+    """The effect's physical parameters ``fraction`` of the way along its path."""
+    values = dict(held)
+    for name, (u_off, u_on) in moved.items():
+        values[name] = float(space[name].from_unit(u_off + fraction * (u_on - u_off)))
+    return values
+
+
+def moved_values(effect_space: ParameterSpace, fraction: float) -> dict[str, float]:
+    """The moved parameters' values ``fraction`` of the way along the path (``detectable_from``)."""
+    moved, held = strength_path(effect_space)
+    return {k: v for k, v in values_at(effect_space, moved, held, fraction).items() if k in moved}
+
+
+class Probe:
+    """Simulate (batched), render and embed at the target's ζ; counts its simulations."""
+
+    def __init__(self, base: Pipeline, render_params: Mapping[str, Any]) -> None:
+        self.base = base
+        self.render_params = dict(render_params)
+        self.simulations = 0
+
+    def trajectories(
+        self, simulator: Any, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+    ) -> list[Any]:
+        """One batch through the simulator's engine (``None`` for a failed simulation)."""
+        self.simulations += len(params)
+        return [t for t, _ in simulate_many(simulator, list(params), [int(s) for s in seeds])]
+
+    def embed(
+        self,
+        trajectories: Sequence[Any],
+        render_params: Mapping[str, Any] | None = None,
+        embedder: Any = None,
+    ) -> np.ndarray:
+        """``(N, D)`` embeddings (a row of NaN for a failed simulation)."""
+        zeta = self.render_params if render_params is None else render_params
+        embedder = embedder or self.base.embedder
+        rows: list[np.ndarray | None] = []
+        for traj in trajectories:
+            rows.append(
+                None
+                if traj is None
+                else np.asarray(
+                    embedder.embed(self.base.renderer.render(traj, zeta)), dtype=np.float64
+                )
+            )
+        width = next((r.size for r in rows if r is not None), 0)
+        return (
+            np.stack([np.full(width, np.nan) if r is None else r for r in rows])
+            if rows
+            else np.zeros((0, 0))
+        )
+
+
+def cross_median(a: np.ndarray, b: np.ndarray) -> float:
+    """Median squared distance between the rows of ``a`` and those of ``b`` (failed rows skipped)."""
+    a, b = a[np.isfinite(a).all(axis=1)], b[np.isfinite(b).all(axis=1)]
+    if len(a) == 0 or len(b) == 0:
+        return float("nan")
+    return float(np.median([squared_distance(x, y) for x in a for y in b]))
+
+
+def pairwise_median(a: np.ndarray) -> float:
+    """Median squared distance among the rows of ``a`` (the noise floor of one θ)."""
+    a = a[np.isfinite(a).all(axis=1)]
+    values = [squared_distance(a[i], a[j]) for i in range(len(a)) for j in range(i + 1, len(a))]
+    return float(np.median(values)) if values else 0.0
+
+
+@dataclass
+class Ladder:
+    """The simulations of one effect's ladder at θ̂ (everything a limit is computed from)."""
+
+    fractions: list[float]
+    values: list[dict[str, float]]
+    embeddings: list[np.ndarray]  # per rung (n, D_e)
+    trajectories: list[list[Any]]
+
+
+def run_ladder(
+    probe: Probe,
+    augmented: Pipeline,
+    theta: Mapping[str, float],
+    effect_space: ParameterSpace,
+    fractions: Sequence[float],
+    seeds: Sequence[int],
+) -> Ladder:
+    """Simulate every rung under ``seeds`` in one batch."""
+    moved, held = strength_path(effect_space)
+    values = [values_at(effect_space, moved, held, f) for f in fractions]
+    jobs = [{**theta, **v} for v in values for _ in seeds]
+    trajs = probe.trajectories(augmented.simulator, jobs, list(seeds) * len(values))
+    n = len(seeds)
+    per_rung = [trajs[i * n : (i + 1) * n] for i in range(len(values))]
+    return Ladder(list(fractions), values, [probe.embed(t) for t in per_rung], per_rung)
+
+
+def ladder_seeds(seed: int, n: int) -> list[int]:
+    """Seeds of the ladder, apart from the diagnosis's trial and re-simulation seeds."""
+    from physinfer.noise import noise_seeds
+
+    return noise_seeds(seed + 11, n, salt=0x11D)

@@ -1,0 +1,247 @@
+"""One effect's detection limit: the rule's threshold at each rung, and where the refit gap clears it.
+
+Part of :mod:`physinfer.diagnose.limits` (the method is described there).
+
+**The threshold of a rung.** The rule names an effect when the baseline's gap ``G`` beats
+what the augmented model leaves, ``A``, by more than the null scale ``S`` (``G − A > S``),
+pays for the effect's ``k`` parameters (``A ≤ f^k · G``), and the model is found
+misspecified (the gap test ``G > factor · S``, unless the effect test can fire). The first
+cut took ``A = S`` (the augmented model fits as well as a correct model). That holds for a
+deterministic forcing, not for a random one: re-simulated under other seeds, a gusty wind
+draws other gusts, so the augmented model leaves its own seed-to-seed noise on top. For
+squared distances the noise adds: ``A = S + max(0, floor_rung − floor)``, where
+``floor_rung`` is the median distance among the rung's own clips (free: they are already
+simulated) and ``floor`` that among θ̂'s re-simulations. On an 8-s flag at gust intensity
+0.5 the rung's clips differ by 16× the baseline's floor — more than the rung is shifted
+from θ̂ — which is why no 8-s gust diagnosis named gusts although the shift cleared ``S``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from physinfer.diagnose.decide import DecisionRule, rank_test_less
+from physinfer.diagnose.ladder import Ladder, Probe, cross_median, moved_values, pairwise_median
+from physinfer.diagnose.refit import RefitState, measured_refit, movers, predicted_refit
+from physinfer.parameters import ParameterSpace
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """``τ``: the baseline gap at which the rule would name an effect, given what its model leaves.
+
+    Attributes:
+        scale: The null scale ``S``.
+        n_params: The effect's extra parameters ``k``.
+        per_parameter_factor: The rule's ``f``.
+        gap_factor: The gap test's factor where the effect test cannot fire, else 0.
+    """
+
+    scale: float
+    n_params: int
+    per_parameter_factor: float
+    gap_factor: float = 0.0
+
+    @classmethod
+    def of(
+        cls, scale: float, n_params: int, rule: DecisionRule, n_candidates: int, n_seeds: int
+    ) -> Threshold:
+        """The rule's threshold for ``n_candidates`` effects and ``K = n_seeds`` re-simulations."""
+        best_p = rank_test_less(list(range(n_seeds)), list(range(n_seeds, 2 * n_seeds)))
+        effect_test = rule.effect_evidence and best_p < rule.alpha / max(n_candidates, 1)
+        gap_factor = 0.0 if effect_test else rule.misspecified_factor
+        return cls(scale, n_params, rule.per_parameter_factor, gap_factor)
+
+    def at(self, excess: float = 0.0) -> float:
+        """``τ`` when the augmented model leaves ``S + excess`` (its own extra seed noise)."""
+        left = self.scale + max(excess, 0.0)
+        return max(
+            left + self.scale,  # the improvement must exceed S
+            left / self.per_parameter_factor**self.n_params,  # ... and pay for k parameters
+            self.gap_factor * self.scale,  # ... and the gap test must fire
+        )
+
+    def scaled(self, ratio: float) -> Threshold:
+        """The same rule with the null scale multiplied by ``ratio`` (another setting's)."""
+        return replace(self, scale=self.scale * ratio)
+
+
+def required_gap(
+    scale: float, n_params: int, rule: DecisionRule, n_candidates: int, n_seeds: int
+) -> float:
+    """``τ`` for an effect whose model fits as well as a correct model (leaving ``S``).
+
+    Args:
+        scale: The null scale ``S`` of the diagnosis.
+        n_params: The effect's extra parameters ``k``.
+        rule: The decision rule.
+        n_candidates: Effects tried (the effect test's Bonferroni divisor).
+        n_seeds: ``K``, re-simulations per gap measurement.
+    """
+    return Threshold.of(scale, n_params, rule, n_candidates, n_seeds).at()
+
+
+def interpolate_limit(
+    fractions: Sequence[float],
+    gaps: Sequence[float],
+    floor_gap: float,
+    threshold: float | Sequence[float],
+) -> float | None:
+    """The fraction where the refit gap first clears the threshold (one, or one per rung).
+
+    Between rungs the ratio gap / threshold is interpolated as a power law (linear in
+    log–log); below the first rung, the excess over the floor grows as the strength squared
+    (a squared distance of a shift linear in a small strength), against the first rung's
+    threshold.
+    """
+    taus = (
+        [float(threshold)] * len(gaps)
+        if isinstance(threshold, int | float)
+        else [float(t) for t in threshold]
+    )
+    prev: tuple[float, float] | None = None
+    for f, g, tau in zip(fractions, gaps, taus, strict=True):
+        if not math.isfinite(g):
+            continue
+        ratio = g / tau
+        if ratio > 1.0:
+            if prev is None or prev[1] <= 0.0:
+                if tau <= floor_gap:
+                    return 0.0
+                return f * math.sqrt((tau - floor_gap) / (g - floor_gap))
+            (pf, pr) = prev
+            return math.exp(
+                math.log(pf)
+                + (math.log(f) - math.log(pf)) * (-math.log(pr)) / (math.log(ratio) - math.log(pr))
+            )
+        prev = (f, ratio)
+    return None
+
+
+def effect_limit(
+    probe: Probe,
+    ladder: Ladder,
+    theta: Mapping[str, float],
+    base_embeddings: np.ndarray,
+    jac: np.ndarray,
+    threshold: Threshold,
+    seeds: Sequence[int],
+    *,
+    effect_space: ParameterSpace,
+    measure: str,
+    keep: Sequence[bool] | None = None,
+) -> dict[str, Any]:
+    """The detection limit of one effect from its ladder.
+
+    Args:
+        probe: For the measured refits.
+        ladder: The effect's rungs.
+        theta: θ̂.
+        base_embeddings: ``(K, D_e)`` re-simulations of θ̂.
+        jac: The baseline's Jacobian at θ̂.
+        threshold: The rule's ``τ``, raised at each rung by that rung's own extra seed noise.
+        seeds: Seeds of the measured refits.
+        effect_space: The effect's parameters.
+        measure: ``"all"`` rungs' refits measured, ``"key"`` (the top and the limit's), or
+            ``"none"`` (predicted only: a what-if).
+        keep: Base parameters the refit may move (``None``: all).
+
+    Returns:
+        ``detectable_from``, ``fraction``, ``reason``, ``mimicked_by``, ``rungs`` (each with
+        its ``floor`` — the median distance among its own clips — and its ``threshold``).
+    """
+    space: ParameterSpace = probe.base.simulator.parameter_space
+    u0 = space.to_unit(space.complete(theta))
+    floor_gap = pairwise_median(base_embeddings)
+    rungs = []
+    for f, values, emb in zip(ladder.fractions, ladder.values, ladder.embeddings, strict=True):
+        gap, delta = predicted_refit(base_embeddings, emb, jac, u0, keep)
+        own = pairwise_median(emb)
+        rungs.append(
+            {
+                "fraction": f,
+                "values": values,
+                "shift": cross_median(emb, base_embeddings),
+                "refit_gap": gap,
+                "floor": own,
+                "threshold": threshold.at(own - floor_gap),
+                "measured": False,
+                "delta": delta,
+            }
+        )
+    taus = [r["threshold"] for r in rungs]
+
+    state = RefitState(jac.copy(), u0, base_embeddings)
+    # A deterministic rung is one simulation per point: search more (see measured_refit).
+    multipliers, polish = ((1.0, 1.5, 2.0, 3.0), 2) if measure == "all" else ((1.0, 2.0), 1)
+
+    def measure_rung(i: int) -> None:
+        r = rungs[i]
+        if r["measured"] or measure == "none":
+            return
+        gap, u = measured_refit(
+            probe, ladder.embeddings[i], state, (u0, base_embeddings), r["delta"], seeds,
+            multipliers=multipliers, polish=polish, keep=keep,
+        )  # fmt: skip
+        if gap < r["shift"]:
+            r.update(refit_gap=gap, delta=u - u0)
+        else:
+            r.update(refit_gap=r["shift"], delta=np.zeros_like(u0))
+        r["measured"] = True
+
+    order = range(len(rungs)) if measure == "all" else [len(rungs) - 1]
+    for i in order:
+        measure_rung(i)
+    fraction = None
+    for _ in range(len(rungs)):  # measuring a rung may move the limit up: settle it
+        fraction = interpolate_limit(
+            ladder.fractions, [r["refit_gap"] for r in rungs], floor_gap, taus
+        )
+        if fraction is None:
+            break
+        i = next(i for i, f in enumerate(ladder.fractions) if f >= fraction - 1e-12)
+        if rungs[i]["measured"] or measure == "none":
+            break
+        measure_rung(i)
+    reason, mimicked_by = None, []
+    if fraction is None:
+        reason, mimicked_by = _why_not(rungs[-1], space, jac, threshold.at(), floor_gap)
+    detectable = None if fraction is None else moved_values(effect_space, fraction)
+    return {
+        "detectable_from": detectable,
+        "fraction": fraction,
+        "reason": reason,
+        "mimicked_by": mimicked_by,
+        "rungs": [
+            {
+                **{k: v for k, v in r.items() if k != "delta"},
+                "refit_step": {n: float(d) for n, d in zip(space.names, r["delta"], strict=True)},
+            }
+            for r in rungs
+        ],
+    }
+
+
+def _why_not(
+    top: Mapping[str, Any], space: ParameterSpace, jac: np.ndarray, tau: float, floor: float
+) -> tuple[str, list[str]]:
+    """The reason the strongest rung is not detectable, and the base parameters that mimic it."""
+    if top["shift"] > top["threshold"]:
+        mimicked_by = movers(space, top["delta"], jac)
+        return f"mimicked by {' and '.join(mimicked_by) or 'the base parameters'}", mimicked_by
+    if top["shift"] > tau:
+        return (
+            f"hidden by its own randomness: re-simulated under other seeds its strongest "
+            f"rung's clips differ by {top['floor']:.3g} ({top['floor'] / max(floor, 1e-300):.2g} x "
+            f"the baseline's noise floor), more than the shift {top['shift']:.3g} can beat "
+            f"(its threshold {top['threshold']:.3g})"
+        ), []
+    return (
+        f"no signature above the noise within its range (strongest shift "
+        f"{top['shift']:.3g}, {top['shift'] / tau:.2f} x the threshold {tau:.3g})"
+    ), []

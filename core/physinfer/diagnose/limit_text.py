@@ -1,0 +1,40 @@
+"""The detection limits in words: the verdict's line per candidate effect.
+
+Part of :mod:`physinfer.diagnose.limits`; reads the dictionaries it writes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+
+def summary_phrase(limit: Mapping[str, Any]) -> str:
+    """``could reveal shear_exponent ≥ 0.55`` or the reason it could not."""
+    if limit["detectable_from"] is None:
+        return f"could not reveal it at any strength in its range ({limit['reason']})"
+    values = ", ".join(f"{k} ≥ {v:.3g}" for k, v in limit["detectable_from"].items())
+    return f"could reveal {values}"
+
+
+def reveal_phrase(limit: Mapping[str, Any]) -> str:
+    """``(you would need …)``: the changes that lower the limit, best first; empty if none."""
+    options = sorted(limit.get("reveal", []), key=lambda r: -(r["factor"] or math.inf))
+    if not options:
+        return ""
+    parts = []
+    for r in options[:3]:
+        where = ", ".join(f"{k} ≥ {v:.3g}" for k, v in (r["detectable_from"] or {}).items())
+        gain = "" if r["factor"] is None else f", {r['factor']:.2g}x lower"
+        parts.append(f"{r['change']}: {where}{gain}")
+    return " (lower with " + "; ".join(parts) + ")"
+
+
+def limit_line(candidate: Mapping[str, Any], named: str | None, clip_seconds: float | None) -> str:
+    """The verdict's line for one candidate, e.g.
+    ``wind_shear: not named; this 8-s clip could reveal shear_exponent ≥ 0.55 (lower with …)``."""
+    limit = {**candidate.get("limit", {}), "detectable_from": candidate.get("detectable_from")}
+    status = "named" if candidate["effect"] == named else "not named"
+    clip = "this clip" if clip_seconds is None else f"this {clip_seconds:.3g}-s clip"
+    return f"{candidate['effect']}: {status}; {clip} {summary_phrase(limit)}{reveal_phrase(limit)}"
