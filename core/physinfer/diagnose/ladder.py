@@ -110,10 +110,15 @@ def cross_median(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.median([squared_distance(x, y) for x in a for y in b]))
 
 
+def pairwise(a: np.ndarray) -> list[float]:
+    """Squared distances among the rows of ``a`` (failed rows skipped), each pair once."""
+    a = a[np.isfinite(a).all(axis=1)]
+    return [squared_distance(a[i], a[j]) for i in range(len(a)) for j in range(i + 1, len(a))]
+
+
 def pairwise_median(a: np.ndarray) -> float:
     """Median squared distance among the rows of ``a`` (the noise floor of one θ)."""
-    a = a[np.isfinite(a).all(axis=1)]
-    values = [squared_distance(a[i], a[j]) for i in range(len(a)) for j in range(i + 1, len(a))]
+    values = pairwise(a)
     return float(np.median(values)) if values else 0.0
 
 

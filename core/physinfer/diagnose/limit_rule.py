@@ -9,9 +9,11 @@ misspecified (the gap test ``G > factor · S``, unless the effect test can fire)
 cut took ``A = S`` (the augmented model fits as well as a correct model). That holds for a
 deterministic forcing, not for a random one: re-simulated under other seeds, a gusty wind
 draws other gusts, so the augmented model leaves its own seed-to-seed noise on top. For
-squared distances the noise adds: ``A = S + max(0, floor_rung − floor)``, where
-``floor_rung`` is the median distance among the rung's own clips (free: they are already
-simulated) and ``floor`` that among θ̂'s re-simulations. On an 8-s flag at gust intensity
+squared distances the noise adds: ``A = S + floor_rung − floor``, where ``floor_rung`` is
+the median distance among the rung's own clips (free: they are already simulated) and
+``floor`` that among θ̂'s re-simulations — counted only when ``floor_rung`` exceeds the 95th
+percentile of θ̂'s distances (a rung has only a pair or a few of clips, and a deterministic
+effect's threshold must not rise by chance). On an 8-s flag at gust intensity
 0.5 the rung's clips differ by 16× the baseline's floor — more than the rung is shifted
 from θ̂ — which is why no 8-s gust diagnosis named gusts although the shift cleared ``S``.
 """
@@ -26,7 +28,14 @@ from typing import Any
 import numpy as np
 
 from physinfer.diagnose.decide import DecisionRule, rank_test_less
-from physinfer.diagnose.ladder import Ladder, Probe, cross_median, moved_values, pairwise_median
+from physinfer.diagnose.ladder import (
+    Ladder,
+    Probe,
+    cross_median,
+    moved_values,
+    pairwise,
+    pairwise_median,
+)
 from physinfer.diagnose.refit import RefitState, measured_refit, movers, predicted_refit
 from physinfer.parameters import ParameterSpace
 
@@ -158,6 +167,10 @@ def effect_limit(
     space: ParameterSpace = probe.base.simulator.parameter_space
     u0 = space.to_unit(space.complete(theta))
     floor_gap = pairwise_median(base_embeddings)
+    # A rung's floor is one pair of clips or a few: it counts as its own noise only beyond the
+    # spread of θ̂'s (its 95th percentile), or a deterministic effect's threshold would rise by chance.
+    base_pairs = pairwise(base_embeddings)
+    floor_q95 = float(np.quantile(base_pairs, 0.95)) if base_pairs else 0.0
     rungs = []
     for f, values, emb in zip(ladder.fractions, ladder.values, ladder.embeddings, strict=True):
         gap, delta = predicted_refit(base_embeddings, emb, jac, u0, keep)
@@ -169,7 +182,7 @@ def effect_limit(
                 "shift": cross_median(emb, base_embeddings),
                 "refit_gap": gap,
                 "floor": own,
-                "threshold": threshold.at(own - floor_gap),
+                "threshold": threshold.at(own - floor_gap if own > floor_q95 else 0.0),
                 "measured": False,
                 "delta": delta,
             }
@@ -205,9 +218,14 @@ def effect_limit(
         if fraction is None:
             break
         i = next(i for i, f in enumerate(ladder.fractions) if f >= fraction - 1e-12)
-        if rungs[i]["measured"] or measure == "none":
+        # Both rungs around the limit: between a measured and a predicted refit the limit
+        # depends on how far the prediction is off, which changes from one clip length to
+        # another (the jittery pendulum's 1.6-s clip came out below its 3.2-s one).
+        bracket = [j for j in (i - 1, i) if j >= 0 and not rungs[j]["measured"]]
+        if not bracket or measure == "none":
             break
-        measure_rung(i)
+        for j in bracket:
+            measure_rung(j)
     reason, mimicked_by = None, []
     if fraction is None:
         reason, mimicked_by = _why_not(rungs[-1], space, jac, threshold.at(), floor_gap)
