@@ -165,7 +165,9 @@ def ladder_case(registry: Any, plugin: str, seed: int, args: argparse.Namespace)
     limits = detection_limits(inputs, LimitConfig(reveal=args.reveal))
     base.renderer.close()
     return {"seed": seed, "theta": theta, "floor": floor.floor, "null_scale": scale,
-            "effects": {e: {k: lim[k] for k in ("detectable_from", "fraction", "reason", "reveal", "threshold")}
+            "effects": {e: {**{k: lim[k] for k in ("detectable_from", "fraction", "reason", "reveal", "threshold")},
+                            "rungs": [{k: r[k] for k in ("fraction", "shift", "floor", "threshold", "refit_gap",
+                                                         "measured")} for r in lim["rungs"]]}
                         for e, lim in limits["effects"].items()},
             **{k: limits[k] for k in ("simulations", "seeds", "clip_seconds", "wall_time_s")},
             "wall_time_s": time.perf_counter() - t0}
@@ -518,6 +520,9 @@ def main() -> None:
         rows = []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             rows.append(ladder_case(registry, args.plugin, seed, args))
+            from physinfer.io import atomic_write_json
+
+            atomic_write_json(Path(args.out) / f"ladder-{args.plugin}-s{seed}.json", rows[-1])  # a row per seed
             print(json.dumps({"seed": seed, **{e: [v["fraction"], v["detectable_from"], v["reason"]]
                                                for e, v in rows[-1]["effects"].items()}}), file=sys.stderr, flush=True)
         print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "cases": rows}))
