@@ -1,0 +1,258 @@
+"""The posterior of one video (``physinfer infer``, and the start of a refinement): embed it,
+sample the estimator, summarise per parameter, and write ``posterior.json``, ``samples.npz``
+and ``corner.png``; the lines printed for it."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.conditioning import Conditioning
+from physinfer.errors import UserInputError
+from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
+from physinfer.parameters import ParameterSpace
+from physinfer.posterior.estimator import PosteriorEstimator
+from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
+from physinfer.posterior.summary import correlations, marginals
+from physinfer.registry import Registry
+
+
+@dataclass
+class PosteriorReport:
+    """The posterior of one target: marginals, correlations and the samples.
+
+    Attributes:
+        marginals: ``{name: {median, ci50, ci90, contraction, label, unit}}``.
+        correlations: Strongest pairs ``[{a, b, r}]``.
+        samples_unit: ``(S, D)`` samples in normalised coordinates.
+        names: ``(D,)`` parameter names.
+        estimator: Path of the estimator used.
+        truth: Known true values, if any.
+        paths: Files written.
+        seconds: Time per stage.
+        scene: The target's scene settings, when given.
+        space: The estimator's parameter space (for :meth:`plot`).
+        target_conditions: How a user's video was framed (:mod:`physinfer.conditioning`).
+    """
+
+    marginals: dict[str, dict[str, Any]]
+    correlations: list[dict[str, Any]]
+    samples_unit: np.ndarray
+    names: list[str]
+    estimator: Path
+    truth: dict[str, float] | None = None
+    paths: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    scene: dict[str, Any] | None = None
+    space: ParameterSpace | None = field(default=None, repr=False)
+    target_conditions: dict[str, Any] | None = None
+
+    def plot(self, title: str = "") -> Any:
+        """The corner plot of the identified parameters and the strongest correlated pair, in
+        physical units with the truth marked where known (a matplotlib figure; ``corner.png``)."""
+        from physinfer.posterior.figures import corner_figure
+
+        if self.space is None:
+            raise ValueError("this report carries no parameter space to draw in")
+        return corner_figure(self, self.space, title=title)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``physinfer infer --json`` prints (and ``posterior.json``)."""
+        d: dict[str, Any] = {
+            "posterior": self.marginals,
+            "correlations": self.correlations,
+            "estimator": str(self.estimator),
+            "n_samples": int(len(self.samples_unit)),
+            "files": self.paths,
+            "seconds": self.seconds,
+        }
+        if self.scene is not None:
+            d["scene"] = self.scene
+        if self.target_conditions:
+            d["target_conditions"] = self.target_conditions
+        if self.truth:
+            d["truth"] = self.truth
+            d["truth_in_ci90"] = {
+                name: bool(m["ci90"][0] <= self.truth[name] <= m["ci90"][1])
+                for name, m in self.marginals.items()
+                if name in self.truth
+            }
+        return d
+
+
+def posterior_of_clip(
+    estimator: PosteriorEstimator, embedder: Any, clip: Any, *, n_samples: int = 5000, seed: int = 0
+) -> PosteriorReport:
+    """Sample the posterior of one clip and summarise it."""
+    t0 = time.perf_counter()
+    x = embed_target(estimator, embedder, clip)
+    t1 = time.perf_counter()
+    samples = estimator.sample_unit(x, n_samples, seed=seed)
+    t2 = time.perf_counter()
+    space = estimator.parameter_space
+    report = PosteriorReport(
+        marginals=marginals(samples, space),
+        correlations=correlations(samples, space.names),
+        samples_unit=samples,
+        names=space.names,
+        estimator=Path("."),
+        seconds={"embed": t1 - t0, "sample": t2 - t1},
+        space=space,
+    )
+    return report
+
+
+def infer(
+    registry: Registry,
+    *,
+    plugin: str,
+    out: Path,
+    target_path: Path | None = None,
+    posterior: Path | None = None,
+    fps: float | None = None,
+    truth: Sequence[str] = (),
+    n_samples: int = 5000,
+    seed: int = 0,
+    device: str | None = None,
+    scene_set: Mapping[str, Any] | None = None,
+    conditioning: Conditioning | None = None,
+) -> PosteriorReport:
+    """The posterior of one video (default: the plugin's embedded target), written to ``out``:
+    ``posterior.json``, ``samples.npz`` and ``corner.png``.
+
+    ``scene_set``: the target's known scene settings (``--scene-set``); an estimator
+    trained on clips of another scene is refused. ``conditioning``: how a ``target_path``
+    video is framed (:mod:`physinfer.conditioning`; ζ is not estimated: the amortized
+    posterior was trained across ζ); ``None``: used as it is.
+
+    Raises:
+        UserInputError: a mismatched or damaged estimator (another scene included), a
+            target too short for it, an unreadable video.
+    """
+    from physinfer.pipeline import load_target
+
+    if n_samples < 100:
+        raise UserInputError(
+            f"--samples {n_samples}: at least 100 samples are needed for intervals"
+        )
+    out = Path(out)
+    check_output_dir(out)
+    t_start = time.perf_counter()
+    from physinfer.scene import resolve_scene
+
+    phenomenon = registry.phenomenon(plugin)
+    scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
+    estimator, path = load_estimator(registry, plugin, posterior, device)
+    estimator.check_scene(phenomenon, scene, path)
+    pipeline = estimator_embedder(registry, estimator, device)
+    if conditioning is not None:
+        conditioning = replace(conditioning, estimate_render=False)
+    target = load_target(
+        pipeline, target_path, fps=fps, truth=truth, render_set={}, conditioning=conditioning
+    )
+    t_ready = time.perf_counter()
+    report = posterior_of_clip(
+        estimator, pipeline.embedder, target.clip, n_samples=n_samples, seed=seed
+    )
+    report.estimator = path
+    report.truth = dict(target.truth) if target.truth else None
+    report.scene = scene
+    report.target_conditions = target.conditions
+    report.seconds["start_up"] = t_ready - t_start
+    write_report(report, estimator, out, title=target.description)
+    pipeline.renderer.close()
+    return report
+
+
+def write_report(
+    report: PosteriorReport, estimator: PosteriorEstimator, out: Path, *, title: str = ""
+) -> None:
+    """``posterior.json``, ``samples.npz`` (physical and normalised) and ``corner.png`` in ``out``."""
+    from physinfer.posterior.figures import corner_plot
+
+    out.mkdir(parents=True, exist_ok=True)
+    space = estimator.parameter_space
+    physical = np.stack(
+        [spec.from_unit(report.samples_unit[:, i]) for i, spec in enumerate(space)], axis=1
+    )
+    atomic_save_npz(
+        out / "samples.npz",
+        names=np.array(report.names),
+        samples=physical,
+        samples_unit=report.samples_unit,
+    )
+    report.paths["samples"] = str(out / "samples.npz")
+    report.paths["corner"] = str(corner_plot(report, space, out / "corner.png", title=title))
+    report.paths["posterior"] = str(out / "posterior.json")
+    atomic_write_json(out / "posterior.json", report.to_dict())
+    from physinfer.report import write_report_quietly  # report.html; a failure only warns
+
+    write_report_quietly(out)
+
+
+def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Printed lines: one per identified or weakly identified parameter, then one line
+    naming every parameter the video does not determine (their numbers are in the JSON)."""
+    from physinfer.posterior.summary import format_marginal
+
+    shown = [
+        format_marginal(name, m) for name, m in marginals_.items() if m["label"] == "identified"
+    ]
+    shown += [
+        format_marginal(name, m)
+        for name, m in marginals_.items()
+        if m["label"] == "weakly identified"
+    ]
+    rest = [name for name, m in marginals_.items() if m["label"] == "not identified"]
+    if rest:
+        shown.append(f"  not identified (the video barely narrows their ranges): {', '.join(rest)}")
+    return shown
+
+
+def posterior_for_refinement(
+    registry: Registry,
+    *,
+    plugin: str,
+    parameter_space: Any,
+    clip: Any,
+    posterior: Path | None,
+    device: str | None = None,
+    seed: int = 0,
+    n_samples: int = 5000,
+    scene: Mapping[str, Any] | None = None,
+) -> tuple[PosteriorReport | None, str | None]:
+    """The amortized posterior of a refinement's target, or why there is none.
+
+    With ``posterior`` given, any mismatch (another plugin, parameter space, embedder, a
+    target shorter than its clips) is the user's error. Without it, the phenomenon's shipped
+    estimator is used when it applies; when it does not (effects switched in, parameters
+    held by ``--fix``, a short target, another ``scene`` than its training clips') the
+    refinement goes on without it and the reason is returned instead.
+
+    Returns:
+        ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
+        phenomenon ships no estimator).
+    """
+    phenomenon = registry.phenomenon(plugin)
+    if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
+        return None, None
+    try:
+        estimator, path = load_estimator(registry, plugin, posterior, device)
+        estimator.check_for(plugin, parameter_space, path)
+        estimator.check_scene(phenomenon, scene, path)
+        pipeline = estimator_embedder(registry, estimator, device)
+        report = posterior_of_clip(
+            estimator, pipeline.embedder, clip, n_samples=n_samples, seed=seed
+        )
+        pipeline.renderer.close()
+    except UserInputError as exc:
+        if posterior is not None:
+            raise
+        return None, f"the plugin's posterior estimator does not apply to this refinement: {exc}"
+    report.estimator = path
+    return report, None

@@ -1,0 +1,113 @@
+"""What the posterior workflows load and check: an estimator (given or the phenomenon's shipped
+one), the embedder it was trained with, a target's embedding, a dataset against the plugin;
+and the ``progress`` callback type they share."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+from physinfer.posterior.estimator import PosteriorEstimator, resolve_device
+from physinfer.registry import Registry
+
+#: ``progress(stage, done, total)``.
+ProgressFn = Callable[[str, int, int], None]
+
+
+def no_progress(stage: str, done: int, total: int) -> None:
+    """The default ``progress``: report nothing."""
+
+
+def build_embedder(
+    registry: Registry,
+    plugin: str,
+    *,
+    embedder: str | None,
+    embedder_frames: int | None,
+    weights: Path | None,
+    device: str | None,
+) -> Any:
+    """The pipeline (simulator, renderer, embedder) of ``plugin`` with the chosen embedder."""
+    from physinfer.pipeline import build_pipeline
+
+    return build_pipeline(
+        registry,
+        plugin,
+        embedder=embedder,
+        weights=weights,
+        device=device,
+        embedder_frames=embedder_frames,
+    )
+
+
+def check_dataset(dataset: Any, plugin: str) -> None:
+    """Refuse a dataset generated for another phenomenon, or one that stores no θ."""
+    made_for = dataset.info.get("config", {}).get("phenomenon")
+    if made_for not in (None, plugin):
+        raise UserInputError(
+            f"{dataset.root} was generated for --plugin {made_for}, not {plugin}; pass --plugin {made_for}"
+        )
+    if not dataset.param_names:
+        raise UserInputError(f"{dataset.root} stores no parameters θ: a posterior needs them")
+
+
+def load_estimator(
+    registry: Registry, plugin: str, path: Path | None, device: str | None = None
+) -> tuple[PosteriorEstimator, Path]:
+    """The estimator at ``path`` or the phenomenon's shipped one, checked against ``plugin``.
+
+    Raises:
+        UserInputError: no estimator given and none shipped, or one made for another
+            phenomenon or parameter space.
+    """
+    phenomenon = registry.phenomenon(plugin)
+    if path is None:
+        shipped = getattr(phenomenon, "default_posterior", None)
+        if shipped is None or not Path(shipped).is_file():
+            raise UserInputError(
+                f"the plugin {plugin!r} ships no posterior estimator; train one with `physinfer posterior "
+                f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
+            )
+        path = Path(shipped)
+    estimator = PosteriorEstimator.load(path, device=resolve_device(device))
+    estimator.check_for(plugin, phenomenon.parameter_space, path)
+    return estimator, Path(path)
+
+
+def estimator_embedder(
+    registry: Registry, estimator: PosteriorEstimator, device: str | None
+) -> Any:
+    """The embedder ``estimator`` was trained with, rebuilt and fingerprint-checked."""
+    c = estimator.config
+    pipeline = build_embedder(
+        registry,
+        c.plugin,
+        embedder=c.embedder,
+        embedder_frames=c.frames_option,
+        weights=Path(c.weights) if c.weights else None,
+        device=device,
+    )
+    estimator.check_embedder(pipeline.embedder)
+    return pipeline
+
+
+def embed_target(estimator: PosteriorEstimator, embedder: Any, clip: Any) -> np.ndarray:
+    """``(E,)`` the target's embedding by the estimator's embedder, with a clear error when
+    the target is shorter than the clips the estimator was trained on."""
+    c = estimator.config
+    if clip.duration + 1e-6 < c.embedder_frames / c.embedder_fps:
+        raise UserInputError(
+            f"the target lasts {clip.duration:.2f} s but the posterior estimator reads {c.embedder_frames} "
+            f"frames at {c.embedder_fps:g} fps ({c.embedder_frames / c.embedder_fps:.2f} s); use a longer "
+            "video, or an estimator trained on shorter clips"
+        )
+    x = np.asarray(embedder.embed(clip), dtype=np.float32)
+    if not np.isfinite(x).all():
+        raise UserInputError(
+            "the target's embedding is not finite (NaN or inf): the video may be blank or damaged"
+        )
+    return x
