@@ -53,7 +53,9 @@ def fast_atan2(y: float, x: float) -> float:
 
 
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
-def stretching_stiffness(c00: float, c11: float, c01: float, samples: np.ndarray) -> tuple[float, float, float, float]:
+def stretching_stiffness(
+    c00: float, c11: float, c01: float, samples: np.ndarray
+) -> tuple[float, float, float, float]:
     """ArcSim's stretching stiffnesses ``(k0, k1, k2, k3)`` in N/m for one triangle.
 
     Args:
@@ -83,6 +85,38 @@ def stretching_stiffness(c00: float, c11: float, c01: float, samples: np.ndarray
     return 2.0 * max(k0, 0.0), 2.0 * max(k1, 0.0), 2.0 * max(k2, 0.0), 2.0 * max(k3, 0.0)
 
 
+@njit(cache=True, error_model="numpy", fastmath=FASTMATH, inline="always")
+def deformation_gradient(
+    p: np.ndarray, i0: int, i1: int, i2: int, a: float, b: float, c: float, d: float
+) -> tuple[float, float, float, float, float, float, float, float, float, float, float, float]:
+    """A triangle's edges and ``[e1 e2] Dm⁻¹`` of per-vertex vectors ``p`` (positions or
+    velocities), inlined into the kernels that share it.
+
+    Args:
+        p: ``(V, 3)`` per-vertex vectors.
+        i0, i1, i2: The triangle's vertices.
+        a, b, c, d: Its inverse rest edge matrix ``Dm⁻¹``, row-major 2×2.
+
+    Returns:
+        ``(e1x, e1y, e1z, e2x, e2y, e2z, ux, uy, uz, vx, vy, vz)``: the edges ``p[i1] - p[i0]``
+        and ``p[i2] - p[i0]``, and the columns u (warp) and v (weft) of ``[e1 e2] Dm⁻¹``
+        (of positions, the deformation gradient F; of velocities, its rate).
+    """
+    e1x = p[i1, 0] - p[i0, 0]
+    e1y = p[i1, 1] - p[i0, 1]
+    e1z = p[i1, 2] - p[i0, 2]
+    e2x = p[i2, 0] - p[i0, 0]
+    e2y = p[i2, 1] - p[i0, 1]
+    e2z = p[i2, 2] - p[i0, 2]
+    ux = e1x * a + e2x * c
+    uy = e1y * a + e2y * c
+    uz = e1z * a + e2z * c
+    vx = e1x * b + e2x * d
+    vy = e1y * b + e2y * d
+    vz = e1z * b + e2z * d
+    return e1x, e1y, e1z, e2x, e2y, e2z, ux, uy, uz, vx, vy, vz
+
+
 @njit(cache=True, error_model="numpy", fastmath=FASTMATH)
 def update_stiffness(
     x: np.ndarray, faces: np.ndarray, dm_inv: np.ndarray, samples: np.ndarray, stiffness: np.ndarray
@@ -98,18 +132,9 @@ def update_stiffness(
     for f in range(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
         a, b, c, d = dm_inv[f, 0], dm_inv[f, 1], dm_inv[f, 2], dm_inv[f, 3]
-        e1x = x[i1, 0] - x[i0, 0]
-        e1y = x[i1, 1] - x[i0, 1]
-        e1z = x[i1, 2] - x[i0, 2]
-        e2x = x[i2, 0] - x[i0, 0]
-        e2y = x[i2, 1] - x[i0, 1]
-        e2z = x[i2, 2] - x[i0, 2]
-        xux = e1x * a + e2x * c
-        xuy = e1y * a + e2y * c
-        xuz = e1z * a + e2z * c
-        xvx = e1x * b + e2x * d
-        xvy = e1y * b + e2y * d
-        xvz = e1z * b + e2z * d
+        _, _, _, _, _, _, xux, xuy, xuz, xvx, xvy, xvz = deformation_gradient(
+            x, i0, i1, i2, a, b, c, d
+        )
         k0, k1, k2, k3 = stretching_stiffness(
             xux * xux + xuy * xuy + xuz * xuz,
             xvx * xvx + xvy * xvy + xvz * xvz,
@@ -164,19 +189,10 @@ def add_face_forces(
     for f in range(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
         a, b, c, d = dm_inv[f, 0], dm_inv[f, 1], dm_inv[f, 2], dm_inv[f, 3]
-        e1x = x[i1, 0] - x[i0, 0]
-        e1y = x[i1, 1] - x[i0, 1]
-        e1z = x[i1, 2] - x[i0, 2]
-        e2x = x[i2, 0] - x[i0, 0]
-        e2y = x[i2, 1] - x[i0, 1]
-        e2z = x[i2, 2] - x[i0, 2]
         # Deformation gradient F = [e1 e2] Dm^-1: columns xu (warp) and xv (weft).
-        xux = e1x * a + e2x * c
-        xuy = e1y * a + e2y * c
-        xuz = e1z * a + e2z * c
-        xvx = e1x * b + e2x * d
-        xvy = e1y * b + e2y * d
-        xvz = e1z * b + e2z * d
+        e1x, e1y, e1z, e2x, e2y, e2z, xux, xuy, xuz, xvx, xvy, xvz = deformation_gradient(
+            x, i0, i1, i2, a, b, c, d
+        )
         c00 = xux * xux + xuy * xuy + xuz * xuz
         c11 = xvx * xvx + xvy * xvy + xvz * xvz
         c01 = xux * xvx + xuy * xvy + xuz * xvz
@@ -185,18 +201,9 @@ def add_face_forces(
         g11 = 0.5 * (c11 - 1.0)
         g01 = 0.5 * c01
         # Strain rate from the same gradient applied to velocities.
-        f1x = v[i1, 0] - v[i0, 0]
-        f1y = v[i1, 1] - v[i0, 1]
-        f1z = v[i1, 2] - v[i0, 2]
-        f2x = v[i2, 0] - v[i0, 0]
-        f2y = v[i2, 1] - v[i0, 1]
-        f2z = v[i2, 2] - v[i0, 2]
-        vux = f1x * a + f2x * c
-        vuy = f1y * a + f2y * c
-        vuz = f1z * a + f2z * c
-        vvx = f1x * b + f2x * d
-        vvy = f1y * b + f2y * d
-        vvz = f1z * b + f2z * d
+        _, _, _, _, _, _, vux, vuy, vuz, vvx, vvy, vvz = deformation_gradient(
+            v, i0, i1, i2, a, b, c, d
+        )
         g00 += beta * (xux * vux + xuy * vuy + xuz * vuz)
         g11 += beta * (xvx * vvx + xvy * vvy + xvz * vvz)
         g01 += beta * 0.5 * (xux * vvx + xuy * vvy + xuz * vvz + xvx * vux + xvy * vuy + xvz * vuz)
@@ -242,7 +249,9 @@ def add_face_forces(
         if nn > 0.0:
             speed = wind_speed
             if shear_exp != 0.0:
-                speed *= shear_factor((x[i0, 2] + x[i1, 2] + x[i2, 2]) * (1.0 / 3.0), shear_exp, z_ref)
+                speed *= shear_factor(
+                    (x[i0, 2] + x[i1, 2] + x[i2, 2]) * (1.0 / 3.0), shear_exp, z_ref
+                )
             third = 1.0 / 3.0
             rx = speed * wind_x - (v[i0, 0] + v[i1, 0] + v[i2, 0]) * third
             ry = speed * wind_y - (v[i0, 1] + v[i1, 1] + v[i2, 1]) * third
@@ -314,7 +323,11 @@ def add_bending_forces(
         n0x, n0y, n0z = normal[fa, 0], normal[fa, 1], normal[fa, 2]
         n1x, n1y, n1z = normal[fb, 0], normal[fb, 1], normal[fb, 2]
         cosine = n0x * n1x + n0y * n1y + n0z * n1z
-        sine = ((n0y * n1z - n0z * n1y) * ex + (n0z * n1x - n0x * n1z) * ey + (n0x * n1y - n0y * n1x) * ez) * inv_le
+        sine = (
+            (n0y * n1z - n0z * n1y) * ex
+            + (n0z * n1x - n0x * n1z) * ey
+            + (n0x * n1y - n0y * n1x) * ez
+        ) * inv_le
         theta = fast_atan2(sine, cosine)
         value = abs(theta) * hinge_curvature[h]
         if value > 4.0:
@@ -329,8 +342,12 @@ def add_bending_forces(
         cap = 1e3 * inv_ee
         q0 = s * min(inv_normal_length[fa], cap)
         q1 = s * min(inv_normal_length[fb], cap)
-        t0 = (ex * (x[i2, 0] - x[i0, 0]) + ey * (x[i2, 1] - x[i0, 1]) + ez * (x[i2, 2] - x[i0, 2])) * inv_ee
-        t1 = (ex * (x[i3, 0] - x[i0, 0]) + ey * (x[i3, 1] - x[i0, 1]) + ez * (x[i3, 2] - x[i0, 2])) * inv_ee
+        t0 = (
+            ex * (x[i2, 0] - x[i0, 0]) + ey * (x[i2, 1] - x[i0, 1]) + ez * (x[i2, 2] - x[i0, 2])
+        ) * inv_ee
+        t1 = (
+            ex * (x[i3, 0] - x[i0, 0]) + ey * (x[i3, 1] - x[i0, 1]) + ez * (x[i3, 2] - x[i0, 2])
+        ) * inv_ee
         f2x = q0 * n0x
         f2y = q0 * n0y
         f2z = q0 * n0z
@@ -353,5 +370,14 @@ def add_bending_forces(
 
 # Callees are linked into the cached code: a change to their files must recompile these.
 cache_depends_on(
-    (fast_atan2, stretching_stiffness, update_stiffness, add_face_forces, add_bending_forces), cloth_numba, cloth_wind
+    (
+        fast_atan2,
+        stretching_stiffness,
+        deformation_gradient,
+        update_stiffness,
+        add_face_forces,
+        add_bending_forces,
+    ),
+    cloth_numba,
+    cloth_wind,
 )
