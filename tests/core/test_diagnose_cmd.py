@@ -21,7 +21,7 @@ def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     assert sim.returncode == 0, sim.stderr
     out = tmp_path / "diag"
     proc = _run("diagnose", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48",
-                "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video",
+                "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video", "--workers", "0",
                 "--out", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
@@ -65,6 +65,7 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     assert "misspecified True (by an effect's significant improvement)" in " ".join(proc.stderr.split())
     # One line per candidate with its detection limit on this clip.
     assert "quadratic_drag: named; this 4-s clip could" in " ".join(proc.stderr.split())
+    assert "took " in proc.stderr and "effect-quadratic_drag" in report["timing"]["stages_s"]
     strict = _run(*args, "--require-gap-test", "--json")
     assert strict.returncode == 0, strict.stderr
     report = json.loads(strict.stdout)

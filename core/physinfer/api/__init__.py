@@ -213,6 +213,7 @@ def diagnose(
     options: DiagnoseOptions | None = None,
     *,
     log: Callable[[str], None] | None = None,
+    progress: bool = False,
     **settings: Any,
 ) -> Diagnosis:
     """Find where the refined model disagrees with the video and name the missing effect
@@ -222,6 +223,7 @@ def diagnose(
         plugin: The phenomenon.
         options: All settings at once; ``settings`` replace its fields.
         log: Called with one line per stage (``None``: silent).
+        progress: Draw a progress bar per stage on stderr.
         **settings: Fields of :class:`DiagnoseOptions`.
     """
     from physinfer.diagnose.decide import DecisionRule
@@ -229,11 +231,6 @@ def diagnose(
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
 
     o = with_settings(DiagnoseOptions, options, settings)
-    plugins = registry()
-    if o.scene_set:  # every model of the diagnosis is built from the scene-bound phenomenon
-        from physinfer.scene import SceneRegistry
-
-        plugins = SceneRegistry(plugins, plugin, dict(o.scene_set))
     out = _optional(o.out) or _default_out(f"diagnose-{plugin}")
     diagnose_settings = DiagnoseSettings(
         plugin=plugin,
@@ -268,10 +265,12 @@ def diagnose(
         videos=not o.no_video,
         limits=o.limits,
         limit_config=LimitConfig(reveal=o.reveal),
+        scene_set=dict(o.scene_set),
+        workers=o.workers,
+        scheduler=o.scheduler,
+        progress=progress,
     )
-    report = run_diagnosis(plugins, diagnose_settings, log=log)
-    if o.scene_set:
-        report["scene"] = plugins.scene
+    report = run_diagnosis(registry(), diagnose_settings, log=log)
     return Diagnosis.from_report(report, out)
 
 

@@ -184,6 +184,9 @@ class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
         no_video: Skip the side-by-side video.
         limits: Estimate each effect's detection limit from a ladder of simulations.
         reveal: Also measure whether another view or a longer clip would lower the limits.
+        workers: Local worker processes running the stages after the baseline side by side
+            (``None``: one per CPU; 0 or 1: in this process).
+        scheduler: A Dask scheduler address whose workers run those stages.
     """
 
     out: Path | None = None
@@ -198,6 +201,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
     no_video: bool = False
     limits: bool = True
     reveal: bool = False
+    workers: int | None = None
+    scheduler: str | None = None
 
 
 @dataclass(frozen=True)

@@ -119,6 +119,22 @@ def diagnose_cmd(
         ),
     ] = False,
     scene_set: SceneSetOpt = [],  # noqa: B006
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers",
+            help="Run the stages after the baseline side by side in K local worker processes (default: one "
+            "per CPU; 0 or 1: in this process). The decisions do not depend on it.",
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Run those stages on a Dask cluster (tcp://host:8786); its workers need physinfer and the "
+            "plugins installed and must see --out.",
+        ),
+    ] = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
@@ -128,7 +144,9 @@ def diagnose_cmd(
     from physinfer.diagnose.limits import limit_line
 
     options = options_from_cli(api.DiagnoseOptions, given)
-    diagnosis = api.diagnose(plugin, options, log=lambda msg: err_console.print(msg, highlight=False))
+    diagnosis = api.diagnose(
+        plugin, options, log=lambda msg: err_console.print(msg, highlight=False), progress=True
+    )
     report, out = diagnosis.to_dict(), diagnosis.out
     if as_json:
         emit_json(report)
@@ -155,3 +173,13 @@ def diagnose_cmd(
                 "  " + limit_line(c, report["named_effect"], report["limits"]["clip_seconds"]), highlight=False
             )
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
+    err_console.print(timing_line(report), highlight=False)
+
+
+def timing_line(report: dict) -> str:
+    """``took 2.1 min: baseline 17 s, calibration-0 34 s, ...`` from the report's timing."""
+    timing = report.get("timing") or {}
+    stages = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in (timing.get("stages_s") or {}).items())
+    workers = timing.get("workers") or 1
+    where = f" ({workers} workers side by side)" if workers > 1 else ""
+    return f"took {report.get('wall_time_s', 0) / 60:.1f} min{where}: {stages}"

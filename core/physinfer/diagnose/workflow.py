@@ -17,7 +17,10 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
 
 Step 2's gap is each model's best θ re-simulated under the same ``K`` fresh seeds (see
 :mod:`physinfer.diagnose.gap`); the decisions are in :mod:`physinfer.diagnose.decide`.
-Re-running with the same ``--out`` continues where it stopped.
+Re-running with the same ``--out`` continues where it stopped. The stages after the
+baseline do not depend on each other: with ``workers`` (default: one per CPU) they run side
+by side on worker processes or a Dask cluster first (:mod:`physinfer.diagnose.parallel`),
+and the pass through the stages below reads them back from disk.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.diagnose.candidates import augmented_pipeline, warm_start
+from physinfer.diagnose.candidates import augmented_pipeline
 from physinfer.diagnose.decide import (
     DecisionRule,
     effect_significance,
@@ -43,16 +46,31 @@ from physinfer.diagnose.decide import (
 from physinfer.diagnose.gap import gap_numbers, measure_gap
 from physinfer.diagnose.limits import LimitConfig
 from physinfer.diagnose.localise import LocaliseConfig, localise
-from physinfer.diagnose.warmstart import warm_start_factory
+from physinfer.diagnose.progress import StageClock, StageProgress
+from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
+    CALIBRATION_SEED_STRIDE,
+    GapContext,
+    Stage,
+    ablated_stage,
+    adopt_single_calibration,
+    build_base,
+    calibration_run,
+    calibration_seeds,
+    clip_of,
+    control_stage,
+    effect_stage,
+    run_stage,
+)
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir
 from physinfer.locking import LOCK_FILE, exclusive_directory
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.parameters import refuse_repeats
-from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
+from physinfer.refine import Pipeline, RefineConfig, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
-from physinfer.rundir import RUN_FILE, RunDirectory
+from physinfer.rundir import RUN_FILE
+from physinfer.scene import scene_of
 from physinfer.session import fixed_by_user, full_parameter_space, optional_settings
 
 Log = Callable[[str], None]
@@ -104,6 +122,15 @@ class DiagnoseSettings:
         limits: Estimate each candidate's detection limit (``detectable_from``).
         limit_config: The detection-limit ladder's settings (``reveal``: also try another
             view and a longer clip).
+        scene_set: The scene's known settings (``--scene-set``; see :mod:`physinfer.scene`),
+            bound to every model of the diagnosis and recorded in each stage's ``run.json``
+            and in ``model.json``.
+        workers: Local worker processes running the stages after the baseline side by side
+            (``None``: one per CPU; 0 or 1: all in this process). The decisions do not
+            depend on it.
+        scheduler: A Dask scheduler address whose workers run those stages instead (they
+            must have the plugins installed and see ``out``).
+        progress: Draw a progress bar per stage on stderr.
     """
 
     plugin: str
@@ -135,6 +162,10 @@ class DiagnoseSettings:
     videos: bool = True
     limits: bool = True
     limit_config: LimitConfig = field(default_factory=LimitConfig)
+    scene_set: Mapping[str, Any] = field(default_factory=dict)
+    workers: int | None = None
+    scheduler: str | None = None
+    progress: bool = False
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad setting."""
@@ -147,6 +178,8 @@ class DiagnoseSettings:
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
             )
         RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=self.batch_size).validate()
+        if self.workers is not None and self.workers < 0:
+            raise UserInputError(f"--workers must be 0 (in this process) or more, got {self.workers}")
         if self.calibration_runs < 1:
             raise UserInputError(
                 f"--calibration-runs must be at least 1, got {self.calibration_runs} "
@@ -157,227 +190,6 @@ class DiagnoseSettings:
             self.localise.validate()
         except ValueError as exc:
             raise UserInputError(f"localisation settings: {exc}") from None
-
-
-@dataclass
-class Stage:
-    """One refined model of the diagnosis and its gap."""
-
-    label: str
-    pipeline: Pipeline
-    result: RefineResult
-    gap: NoiseFloor
-    n_params: int = 0
-    params: dict[str, float] | None = None
-
-    @property
-    def best_params(self) -> dict[str, float]:
-        """The θ this stage stands for (the refinement's best, or its ablated version)."""
-        return dict(self.params) if self.params is not None else dict(self.result.best_params)
-
-
-def run_stage(
-    name: str,
-    pipeline: Pipeline,
-    target: Target,
-    *,
-    registry: Registry,
-    settings: DiagnoseSettings,
-    steps: int,
-    start: Mapping[str, float] | None,
-    target_label: str,
-    seed: int | None = None,
-) -> RefineResult:
-    """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
-
-    Args:
-        name: Sub-directory of the stage.
-        pipeline: The model.
-        target: What to match.
-        registry: For the optimizer.
-        settings: The diagnosis settings (optimizer, seed, embedder).
-        steps: Trials in all.
-        start: Physical warm-start values (``None``: the centre).
-        target_label: Stored in ``run.json``.
-        seed: Optimizer and simulation seed (``None``: the diagnosis seed).
-    """
-    seed = settings.seed if seed is None else seed
-    space = pipeline.simulator.parameter_space
-    factory = registry.get("optimizers", settings.optimizer).load()
-    if start is not None:
-        factory = warm_start_factory(factory, space.to_unit(space.complete(start)))
-    run_dir = RunDirectory(settings.out / name)
-    run_info = {
-        "plugin": settings.plugin,
-        "optimizer": settings.optimizer,
-        "seed": seed,
-        "steps": steps,
-        "effects": [e.name for e in pipeline.effects],
-        "embedder": settings.embedder or pipeline.phenomenon.default_embedder,
-        "parameters": space.to_dict(),
-        "target": target_label,
-        "render_params": dict(target.render_params),
-        "truth": target.truth,
-        "start": None if start is None else {k: float(v) for k, v in start.items()},
-        "stage": name,
-        **optional_settings(fixed_by_user(pipeline, settings.fixed), settings.duration_s, settings.embedder_frames),
-    }
-    config = RefineConfig(
-        steps=steps, optimizer=settings.optimizer, seed=seed,
-        select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
-    )
-    resume = run_dir.run_file.is_file()
-    return run_refinement(pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume)
-
-
-def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
-    from physinfer.session import EffectParameterError, build_pipeline, load_target
-
-    try:
-        pipeline = build_pipeline(
-            registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
-            duration_s=settings.duration_s, embedder_frames=settings.embedder_frames, fixed=settings.fixed,
-        )  # fmt: skip
-    except EffectParameterError as exc:  # diagnose switches effects in itself: no --effect to add
-        raise UserInputError(
-            f"{exc.name} (in --fix) belongs to the effect {exc.effect}, which diagnose tries itself: "
-            "--fix only parameters of the model without effects"
-        ) from None
-    target = load_target(
-        pipeline, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
-        fixed=settings.fixed,
-    )
-    return pipeline, target
-
-
-def _clip(pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int) -> Any:
-    return pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), target.render_params)
-
-
-def _calibration_target(
-    pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int, encode_dir: Path | None
-) -> Target:
-    """A synthetic target made by the baseline model itself at its best θ (another seed).
-
-    With ``encode_dir`` the clip makes a round trip through the video encoder, as a target
-    read from a file did: compression changes the pixels, and a self-consistency target
-    without it would be easier to match than the real one.
-    """
-    clip = _clip(pipeline, params, target, seed)
-    if encode_dir is not None:
-        from physinfer.video import read_video, write_video
-
-        encode_dir.mkdir(parents=True, exist_ok=True)
-        path = write_video(encode_dir / "self_target.mp4", clip)
-        clip = read_video(path, fps=clip.fps)
-    return Target(clip, dict(params), dict(target.render_params), "self-consistency target at the baseline fit")
-
-
-#: Step between the optimizer seeds of successive calibration runs: any step keeps them
-#: apart from the baseline's seed; a large one also keeps them off the seeds of a diagnosis
-#: run with a neighbouring ``--seed`` (the benchmark's next case).
-CALIBRATION_SEED_STRIDE = 7919
-
-
-def calibration_seeds(seed: int, runs: int) -> list[tuple[int, int]]:
-    """``(target simulation seed, optimizer seed)`` of each self-consistency run.
-
-    Run 0 has the seeds of the single calibration of earlier versions, so an old
-    ``calibration/`` directory continues as ``calibration-0/``. The optimizer seed differs
-    from the baseline's: with the same seed the optimizer would propose the baseline's first
-    trials again, one of which made the target (too easy a test).
-
-    Args:
-        seed: The diagnosis seed.
-        runs: ``R``.
-
-    Returns:
-        ``R`` pairs, all target seeds distinct.
-    """
-    return [(t, seed + 1 + CALIBRATION_SEED_STRIDE * r) for r, t in enumerate(noise_seeds(seed + 7, runs))]
-
-
-def _adopt_single_calibration(out: Path) -> None:
-    """Rename the ``calibration/`` stage of an older diagnosis to ``calibration-0/``."""
-    old, new = out / "calibration", out / "calibration-0"
-    if (old / RUN_FILE).is_file() and not new.exists():
-        old.rename(new)
-
-
-def run_calibration(
-    base: Pipeline,
-    params: Mapping[str, float],
-    target: Target,
-    *,
-    registry: Registry,
-    settings: DiagnoseSettings,
-    steps: int,
-    effect_steps: int,
-    seeds: Sequence[int],
-) -> list[dict[str, Any]]:
-    """Refine the baseline ``R`` times against targets it made itself at ``params``; their gaps.
-
-    Each run ``r`` is the stage ``calibration-<r>/`` (resumable), with its own target seed
-    and optimizer seed from :func:`calibration_seeds` and the baseline's budget; its gap is
-    measured under the diagnosis' re-simulation ``seeds`` like every other model's. With
-    ``settings.calibration_control`` the run continues in ``calibration-<r>-control/`` for
-    ``effect_steps`` trials from its best θ (the same seeds), mirroring ``control/``; the
-    run's gap is then the smaller of the two stages' gaps, as ``gap_before`` is the best of
-    the real target's baseline fits.
-
-    Args:
-        base: The baseline model.
-        params: The baseline's best θ.
-        target: The real target (its ζ; whether it came from a file).
-        registry: For the optimizer.
-        settings: The diagnosis settings (``calibration_runs``, ``out``).
-        steps: Trials per run (the baseline's).
-        effect_steps: Trials of each run's control (the control's).
-        seeds: Re-simulation seeds of the gap measurements.
-
-    Returns:
-        One record per run, in run order: ``gap`` (the run's self-consistency gap),
-        ``gap_run`` and ``gap_control`` (``None`` without a control), ``target_seed``,
-        ``optimizer_seed``.
-    """
-    _adopt_single_calibration(settings.out)
-    runs = []
-    for r, (target_seed, optimizer_seed) in enumerate(calibration_seeds(settings.seed, settings.calibration_runs)):
-        name = f"calibration-{r}"
-        encode_dir = settings.out / name if settings.target_path is not None else None
-        cal_target = _calibration_target(base, params, target, target_seed, encode_dir)
-        cal = run_stage(
-            name, base, cal_target, registry=registry, settings=settings, steps=steps, start=None,
-            target_label="self-consistency", seed=optimizer_seed,
-        )
-        cal_embedding = base.embedder.embed(cal_target.clip)
-        gap = float(
-            measure_gap(
-                base, cal.best_params, target.render_params, cal_embedding, seeds=seeds, cache_dir=settings.out / name
-            ).gap
-        )
-        gap_control = None
-        if settings.calibration_control:
-            control = run_stage(
-                f"{name}-control", base, cal_target, registry=registry, settings=settings, steps=effect_steps,
-                start=cal.best_params, target_label="self-consistency", seed=optimizer_seed,
-            )
-            gap_control = float(
-                measure_gap(
-                    base, control.best_params, target.render_params, cal_embedding, seeds=seeds,
-                    cache_dir=settings.out / f"{name}-control",
-                ).gap
-            )
-        runs.append(
-            {
-                "gap": gap if gap_control is None else min(gap, gap_control),
-                "gap_run": gap,
-                "gap_control": gap_control,
-                "target_seed": int(target_seed),
-                "optimizer_seed": int(optimizer_seed),
-            }
-        )
-    return runs
 
 
 def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | None = None) -> dict[str, Any]:
@@ -396,6 +208,9 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     check_diagnosis_out(settings.out)
     registry.get("optimizers", settings.optimizer)  # fail early, listing the installed ones
     start_time = time.perf_counter()
+    from physinfer.diagnose.parallel import scene_registry
+
+    registry = scene_registry(registry, settings)  # every model is built for the scene
     base, target = _load(registry, settings)
     phenomenon = base.phenomenon
     effect_names = list(settings.effects) or registry.effects_of(phenomenon.name)
@@ -405,12 +220,25 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     # Everything is checked: only now is --out created, and held against a second writer.
     with exclusive_directory(settings.out):
         report = _diagnose(registry, settings, base, target, effect_objs, log or (lambda _msg: None))
+        if (scene := scene_of(phenomenon)) is not None:
+            report["scene"] = scene
         report["wall_time_s"] = time.perf_counter() - start_time
         atomic_write_json(settings.out / "diagnosis.json", report)
         from physinfer.report import write_report_quietly  # report.html; a failure only warns
 
         write_report_quietly(settings.out)
     return report
+
+
+def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
+    from physinfer.session import load_target
+
+    base = build_base(registry, settings)
+    target = load_target(
+        base, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
+        fixed=settings.fixed,
+    )  # fmt: skip
+    return base, target
 
 
 def check_diagnosis_out(out: Path) -> None:
@@ -441,23 +269,41 @@ def _diagnose(
     say: Log,
 ) -> dict[str, Any]:
     """The stages and the decision of :func:`run_diagnosis`, with ``--out`` locked; returns the report."""
+    with StageProgress(settings.progress) as bars:
+        return _diagnose_stages(registry, settings, base, target, effect_objs, say, bars)
+
+
+def _diagnose_stages(
+    registry: Registry,
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    target: Target,
+    effect_objs: Mapping[str, Any],
+    say: Log,
+    bars: StageProgress,
+) -> dict[str, Any]:
     steps = settings.steps or base.phenomenon.default_steps
     effect_steps = settings.effect_steps or steps
     target_label = str(settings.target_path) if settings.target_path else "default"
     target_embedding = base.embedder.embed(target.clip)
     seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
-    common = {"registry": registry, "settings": settings}
-
-    def gap_of(pipeline: Pipeline, params: Mapping[str, float], stage: str, cache_name: str = "gap.json") -> NoiseFloor:
-        return measure_gap(
-            pipeline, params, target.render_params, target_embedding, seeds=seeds, cache_dir=settings.out / stage,
-            cache_name=cache_name,
-        )
+    gaps = GapContext(target, target_embedding, tuple(seeds), settings.out)
+    common = {"registry": registry, "settings": settings, "on_trial": bars.update}
+    clock = StageClock()
 
     # 1. The baseline.
     say(f"[1/6] refining the baseline ({steps} trials)")
-    baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
-    gap0 = gap_of(base, baseline.best_params, "baseline")
+    with clock.stage("baseline"):
+        baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
+        gap0 = gaps.measure(base, baseline.best_params, "baseline")
+
+    # The stages below start from the baseline's fit and not from each other: side by side
+    # on workers first, if there are any; the pass below then reads them from disk.
+    adopt_single_calibration(settings.out)
+    workers = _run_on_workers(
+        settings, list(effect_objs), baseline.best_params, target, target_embedding, seeds, steps, effect_steps,
+        target_label, bars, clock, say,
+    )  # fmt: skip
 
     # 2. The self-consistency runs (the null scale's optimizer part).
     calibration: list[dict[str, Any]] = []
@@ -467,47 +313,39 @@ def _diagnose(
             f"[2/6] self-consistency: refining the baseline against its own fit "
             f"({settings.calibration_runs} × {per_run} trials)"
         )
-        calibration = run_calibration(
-            base, baseline.best_params, target, steps=steps, effect_steps=effect_steps, seeds=seeds, **common
-        )
+        for r in range(settings.calibration_runs):
+            with clock.stage(f"calibration-{r}"):
+                calibration.append(
+                    calibration_run(
+                        r, base, baseline.best_params, target, steps=steps, effect_steps=effect_steps, seeds=seeds,
+                        **common,
+                    )  # fmt: skip
+                )
     self_gaps = [run["gap"] for run in calibration]
     self_gap = self_consistency_gap(self_gaps, settings.rule.calibration_summary)
     scale = null_scale(gap0.floor, gap0.floor_q95, self_gap)
 
     # 4. Equal-budget control and one augmented model per effect, all warm-started.
     say(f"[3/6] control: the baseline refined {effect_steps} more trials from its fit")
-    control = run_stage(
-        "control", base, target, steps=effect_steps, start=baseline.best_params, target_label=target_label, **common
-    )
-    base_space = base.simulator.parameter_space
-    stages = [Stage("baseline", base, control, gap_of(base, control.best_params, "control"))]
+    with clock.stage("control"):
+        stages = [
+            control_stage(base, target, baseline.best_params, gaps, effect_steps=effect_steps,
+                          target_label=target_label, **common)  # fmt: skip
+        ]
     for name, effect in effect_objs.items():
         say(f"[4/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
-        pipeline = augmented_pipeline(base, [effect], settings.duration_s, fixed_by_user(base, settings.fixed))
-        result = run_stage(
-            f"effect-{name}",
-            pipeline,
-            target,
-            steps=effect_steps,
-            start=warm_start(baseline.best_params, [effect]),
-            target_label=target_label,
-            **common,
-        )
-        stages.append(
-            Stage(name, pipeline, result, gap_of(pipeline, result.best_params, f"effect-{name}"),
-                  n_params=len(effect.parameter_space))
-        )
+        with clock.stage(f"effect-{name}"):
+            stages.append(
+                effect_stage(
+                    name, effect, base, target, baseline.best_params, gaps, effect_steps=effect_steps,
+                    target_label=target_label, **common,
+                )  # fmt: skip
+            )
 
     # An augmented run may owe its better fit to its base parameters, not to its effect:
     # its best θ with the effect switched off is a baseline fit too, and the best baseline
     # fit found by any stage is what an effect must beat (ablation).
-    ablated = []
-    for stage in stages[1:]:
-        off = {k: v for k, v in warm_start(stage.result.best_params, stage.pipeline.effects).items() if k in base_space}
-        ablated.append(
-            Stage(f"{stage.label} off", base, stage.result,
-                  gap_of(base, off, f"effect-{stage.label}", cache_name="gap_effect_off.json"), params=off)
-        )
+    ablated = [ablated_stage(stage, base, gaps) for stage in stages[1:]]
     before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
     gap_before = float(before.gap.gap)
     # The misspecification test compares like with like: with calibration controls the
@@ -553,23 +391,59 @@ def _diagnose(
     say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
     limits = None
     if settings.limits:
-        n_sims = _diagnosis_simulations(settings, [baseline, control, *(s.result for s in stages[1:])], calibration,
+        n_sims = _diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], calibration,
                                         n_gaps=2 + len(calibration) * (2 if settings.calibration_control else 1)
                                         + 2 * len(effect_objs))
-        limits = _limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
+        with clock.stage("limits"):
+            limits = _limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
         for cand in candidates:
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
             cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
     say("[6/6] localising and writing outputs")
 
-    report = _outputs(
-        settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
-        baseline,
-    )
+    with clock.stage("outputs"):
+        report = _outputs(
+            settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
+            baseline,
+        )
     report["limits"] = None if limits is None else {k: v for k, v in limits.items() if k != "effects"}
+    report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
+
+
+def _run_on_workers(
+    settings: DiagnoseSettings,
+    effects: Sequence[str],
+    baseline_best: Mapping[str, float],
+    target: Target,
+    target_embedding: np.ndarray,
+    seeds: Sequence[int],
+    steps: int,
+    effect_steps: int,
+    target_label: str,
+    bars: StageProgress,
+    clock: StageClock,
+    say: Log,
+) -> dict[str, Any]:
+    """Run the stages after the baseline on workers when more than one is usable; how they ran."""
+    from physinfer.diagnose.parallel import prefetch_stages, stage_jobs, usable_workers
+
+    jobs = stage_jobs(
+        settings, effects, baseline_best=baseline_best, target=target, target_embedding=target_embedding,
+        seeds=seeds, steps=steps, effect_steps=effect_steps, target_label=target_label,
+    )  # fmt: skip
+    workers, why_not = usable_workers(settings, len(jobs), effects)
+    if why_not:
+        say(f"      {why_not}")
+    if workers < 2:
+        return {"workers": 1, "scheduler": None}
+    where = f"the Dask cluster at {settings.scheduler}" if settings.scheduler else f"{workers} worker processes"
+    say(f"      the {len(jobs)} stages after the baseline run side by side on {where}")
+    with clock.stage("side_by_side"):
+        clock.add(prefetch_stages(jobs, workers, scheduler=settings.scheduler, on_progress=bars.update, say=say))
+    return {"workers": workers, "scheduler": settings.scheduler}
 
 
 def _diagnosis_simulations(settings: DiagnoseSettings, results: Sequence[RefineResult],
@@ -661,13 +535,13 @@ def _outputs(
     from physinfer.diagnose.model import write_model
 
     out = settings.out
-    fit_before = _clip(before.pipeline, before.best_params, target, settings.seed)
+    fit_before = clip_of(before.pipeline, before.best_params, target, settings.seed)
     numbers, t_maps, b_maps = localise(target.clip, fit_before, settings.localise)
     rows = [("target", t_maps), ("baseline fit", b_maps)]
     clips = [target.clip, fit_before]
     after_numbers = None
     if named:
-        fit_after = _clip(after.pipeline, after.best_params, target, settings.seed)
+        fit_after = clip_of(after.pipeline, after.best_params, target, settings.seed)
         after_numbers, _, a_maps = localise(target.clip, fit_after, settings.localise)
         rows.append((f"+ {named}", a_maps))
         clips.append(fit_after)
@@ -703,6 +577,7 @@ def _outputs(
         gap=float(after.gap.gap),
         source=after.result.run_dir,
         **optional_settings(fixed, settings.duration_s, settings.embedder_frames),  # what the values were fitted under
+        **({"scene": scene} if (scene := scene_of(after.pipeline.phenomenon)) is not None else {}),
     )
     gap_after = float(after.gap.gap)
     gap_before = float(before.gap.gap)

@@ -1,0 +1,269 @@
+"""Run a diagnosis' independent stages side by side on worker processes (or a Dask cluster).
+
+After the baseline, a diagnosis refines ``R`` self-consistency runs (each followed by its
+control), the control, and one augmented model per effect. None needs another's result:
+all start from the baseline's fit. :func:`prefetch_stages` sends them as jobs to
+:func:`physinfer.datasets.open_executor` — ``workers`` local processes, or the workers of a
+Dask scheduler — where :func:`run_job` runs the same stage functions
+(:mod:`physinfer.diagnose.stages`) the workflow runs, into the same directories. The
+workflow then goes through its stages in order as before and finds each finished on disk,
+so the decisions are those of a diagnosis run in one process (each stage's optimizer and
+simulations are seeded by the stage alone).
+
+A job that fails on a worker is only reported: the workflow runs that stage itself and
+meets the failure (or not) where it would have without workers.
+
+Workers build the plugins from their entry points (:func:`physinfer.plugins.load_registry`):
+a registry assembled in code (tests, notebooks registering a plugin by hand) cannot be
+rebuilt there, so :func:`usable_workers` falls back to one process for it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from physinfer.diagnose.stages import (
+    GapContext,
+    ablated_stage,
+    build_base,
+    calibration_run,
+    calibration_stage_names,
+    control_stage,
+    effect_stage,
+)
+from physinfer.roles import Target
+
+if TYPE_CHECKING:
+    from physinfer.diagnose.workflow import DiagnoseSettings
+
+#: Seconds between looks at the stages' trial logs for the progress display.
+POLL_S = 0.5
+
+_local = threading.local()
+
+
+@dataclass(frozen=True)
+class StageJob:
+    """One independent unit of a diagnosis: a calibration run (with its control), the
+    control, or one effect's model.
+
+    Attributes:
+        kind: ``"calibration"``, ``"control"`` or ``"effect"``.
+        key: The calibration run's index, or the effect's name (``""`` for the control).
+        settings: The diagnosis settings.
+        baseline_best: The baseline's best θ, where every job starts from.
+        target: The target (clip, ζ, truth).
+        target_embedding: Its embedding (the gaps are measured against it).
+        seeds: The gap measurements' re-simulation seeds.
+        steps: The baseline's budget (a calibration run's).
+        effect_steps: The control's and each model's budget.
+        target_label: Stored in each stage's ``run.json``.
+    """
+
+    kind: str
+    key: int | str
+    settings: DiagnoseSettings
+    baseline_best: Mapping[str, float]
+    target: Target
+    target_embedding: np.ndarray
+    seeds: tuple[int, ...]
+    steps: int
+    effect_steps: int
+    target_label: str
+
+    @property
+    def stages(self) -> list[tuple[str, int]]:
+        """``(directory, trials)`` of each stage the job writes, in order."""
+        if self.kind == "calibration":
+            names = calibration_stage_names(int(self.key), self.settings)
+            return [
+                (name, self.steps if i == 0 else self.effect_steps) for i, name in enumerate(names)
+            ]
+        return [("control" if self.kind == "control" else f"effect-{self.key}", self.effect_steps)]
+
+
+def stage_jobs(
+    settings: DiagnoseSettings,
+    effects: Sequence[str],
+    *,
+    baseline_best: Mapping[str, float],
+    target: Target,
+    target_embedding: np.ndarray,
+    seeds: Sequence[int],
+    steps: int,
+    effect_steps: int,
+    target_label: str,
+) -> list[StageJob]:
+    """Every job after the baseline, the longest first (a calibration run and its control
+    take two stages' time), so the last to finish is a short one."""
+    common = {
+        "settings": settings, "baseline_best": dict(baseline_best), "target": target,
+        "target_embedding": np.asarray(target_embedding), "seeds": tuple(int(s) for s in seeds),
+        "steps": steps, "effect_steps": effect_steps, "target_label": target_label,
+    }  # fmt: skip
+    calibration = range(settings.calibration_runs) if settings.calibrate else range(0)
+    jobs = [StageJob("calibration", r, **common) for r in calibration]
+    jobs.append(StageJob("control", "", **common))
+    jobs += [StageJob("effect", name, **common) for name in effects]
+    return sorted(jobs, key=lambda job: -sum(trials for _, trials in job.stages))
+
+
+def run_job(job: StageJob) -> dict[str, float]:
+    """Run one job in this (worker) process; the seconds each of its stages took."""
+    from physinfer.threads import refinement_torch_threads, torch_threads
+
+    registry, base = _worker_pipeline(job.settings)
+    common = {"registry": registry, "settings": job.settings}
+    gaps = GapContext(job.target, job.target_embedding, job.seeds, job.settings.out)
+    seconds: dict[str, float] = {}
+    start = time.perf_counter()
+    with torch_threads(refinement_torch_threads()):
+        if job.kind == "calibration":
+            calibration_run(
+                int(job.key), base, job.baseline_best, job.target, steps=job.steps, effect_steps=job.effect_steps,
+                seeds=job.seeds, **common,
+            )  # fmt: skip
+        elif job.kind == "control":
+            control_stage(base, job.target, job.baseline_best, gaps, effect_steps=job.effect_steps,
+                          target_label=job.target_label, **common)  # fmt: skip
+        else:
+            effect = registry.effect(str(job.key), phenomenon=job.settings.plugin)
+            stage = effect_stage(
+                str(job.key), effect, base, job.target, job.baseline_best, gaps, effect_steps=job.effect_steps,
+                target_label=job.target_label, **common,
+            )  # fmt: skip
+            ablated_stage(stage, base, gaps)
+    # One figure for the job: its stages ran back to back, the first most of the time.
+    seconds[job.stages[0][0]] = time.perf_counter() - start
+    return seconds
+
+
+def _worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
+    """The registry and baseline model of ``settings`` in this worker thread, built once."""
+    key = (
+        settings.plugin, settings.embedder, str(settings.weights), settings.device, settings.duration_s,
+        settings.embedder_frames, settings.fixed, tuple(sorted(settings.scene_set.items())),
+    )  # fmt: skip
+    cache: dict[tuple, tuple[Any, Any]] = _local.__dict__.setdefault("pipelines", {})
+    if key not in cache:
+        from physinfer.plugins import load_registry
+
+        registry = scene_registry(load_registry()[0], settings)
+        cache[key] = (registry, build_base(registry, settings))
+    return cache[key]
+
+
+def scene_registry(registry: Any, settings: DiagnoseSettings) -> Any:
+    """``registry`` with the diagnosed phenomenon bound to the settings' scene, if any."""
+    if not settings.scene_set:
+        return registry
+    from physinfer.scene import SceneRegistry
+
+    return SceneRegistry(registry, settings.plugin, dict(settings.scene_set))
+
+
+def usable_workers(
+    settings: DiagnoseSettings, n_jobs: int, effects: Sequence[str]
+) -> tuple[int, str | None]:
+    """How many workers to use, and why not more (``None`` when nothing held them back).
+
+    ``settings.workers`` ``None`` means one per CPU; never more than there are jobs. Workers
+    need the plugin and every effect installed as entry points (see the module docstring).
+    """
+    if settings.scheduler:
+        return max(1, n_jobs), None
+    from physinfer.datasets.executors import default_workers
+
+    wanted = default_workers() if settings.workers is None else settings.workers
+    workers = min(wanted, n_jobs)
+    if workers < 2:
+        return 1, None
+    try:
+        from physinfer.plugins import load_registry
+
+        installed = load_registry()[0]
+        installed.phenomenon(settings.plugin)
+        for name in effects:
+            installed.effect(name, phenomenon=settings.plugin)
+    except Exception:  # noqa: BLE001 - any failure means a worker could not rebuild the model
+        return (
+            1,
+            f"{settings.plugin} or one of its effects is not installed as a plugin: stages run in this process",
+        )
+    return workers, None
+
+
+def prefetch_stages(
+    jobs: Sequence[StageJob],
+    workers: int,
+    *,
+    scheduler: str | None,
+    on_progress: Callable[[str, int, int], None],
+    say: Callable[[str], None],
+) -> dict[str, float]:
+    """Run ``jobs`` on ``workers`` processes (or on ``scheduler``'s workers); the seconds
+    each job's first stage took. Progress comes from counting each stage's logged trials.
+    A failed job is said and left for the workflow to run again."""
+    from physinfer.datasets.executors import open_executor
+
+    seconds: dict[str, float] = {}
+    with open_executor(workers=workers, scheduler=scheduler, threads_per_worker=1) as (
+        executor,
+        _info,
+    ):
+        futures: dict[Future, StageJob] = {executor.submit(run_job, job): job for job in jobs}
+        pending = set(futures)
+        with _watching(
+            [stage for job in jobs for stage in job.stages], jobs[0].settings.out, on_progress
+        ):
+            while pending:
+                done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
+                for future in done:
+                    job = futures[future]
+                    try:
+                        seconds.update(future.result())
+                    except Exception as exc:  # noqa: BLE001 - the workflow runs the stage again here
+                        say(f"      {job.stages[0][0]} failed on a worker ({type(exc).__name__}: {exc}); "
+                            "running it here")  # fmt: skip
+    return seconds
+
+
+@contextmanager
+def _watching(
+    stages: Sequence[tuple[str, int]], out: Any, on_progress: Callable[[str, int, int], None]
+) -> Iterator[None]:
+    """Report every stage's logged trials every :data:`POLL_S` seconds while the block runs."""
+    stop = threading.Event()
+
+    def poll() -> None:
+        while True:
+            for name, trials in stages:
+                on_progress(name, min(_logged_trials(out / name / "trials.jsonl"), trials), trials)
+            if stop.wait(POLL_S):
+                return
+
+    thread = threading.Thread(target=poll, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+        for name, trials in stages:  # the final counts
+            on_progress(name, min(_logged_trials(out / name / "trials.jsonl"), trials), trials)
+
+
+def _logged_trials(path: Any) -> int:
+    try:
+        with open(path, "rb") as fh:
+            return sum(1 for _ in fh)
+    except OSError:
+        return 0
