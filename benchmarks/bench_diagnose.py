@@ -184,8 +184,14 @@ def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str, strength: 
 
 
 def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace,
-             strength: float | None = None) -> dict[str, Any]:
-    """Make one target and diagnose it; the row is also written to ``case.json``."""
+             strength: float | None = None, workers: int | None = 1, subdir: str = "diagnosis") -> dict[str, Any]:
+    """Make one target and diagnose it in ``<case>/<subdir>``; the row is also written to
+    ``<subdir>``'s ``case.json`` (``case.json`` for the default ``diagnosis``).
+
+    ``workers``: processes running the stages after the baseline (1: all in this one, as
+    the stored tables were made; the decisions do not depend on it)."""
+    import functools
+
     from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.io import atomic_write_json
 
@@ -207,7 +213,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         registry,
         DiagnoseSettings(
             plugin=plugin,
-            out=case_dir / "diagnosis",
+            out=case_dir / subdir,
             target_path=case_dir / "target.mp4",
             render_set=render_set,
             steps=args.steps,
@@ -225,6 +231,8 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             calibration_control=not args.no_calibration_control,
             videos=False,
             limits=not args.no_limits,
+            workers=workers,
+            registry_factory=functools.partial(load_bench_registry, args.frames),
         ),
     )
     row = {
@@ -259,9 +267,41 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
                                  "reason": c.get("limit", {}).get("reason")} for c in report["candidates"]},
         "limit_cost": report.get("limits"),
         "wall_time_s": time.perf_counter() - t0,
+        "timing": report.get("timing"),
     }
-    atomic_write_json(case_dir / "case.json", row)
+    atomic_write_json(case_dir / ("case.json" if subdir == "diagnosis" else f"case-{subdir}.json"), row)
     return row
+
+
+def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]) -> dict[str, Any]:
+    """Each case diagnosed twice from scratch: in one process ("before": the stages one
+    after another, as every stored table was made) and with ``--workers`` processes ("after");
+    wall time per diagnosis and per stage, and whether every decision is the same."""
+    from physinfer.datasets.executors import default_workers
+
+    after = args.workers or default_workers()
+    rows, same = [], 0
+    for hidden, seed in all_cases:
+        pair = {}
+        for workers in (1, after):
+            case = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=f"timing-w{workers}")
+            pair[workers] = case
+            print(json.dumps({"hidden": hidden, "seed": seed, "workers": workers, "named": case["named"],
+                              "misspecified": case["misspecified"], "wall_time_s": round(case["wall_time_s"], 1)}),
+                  file=sys.stderr, flush=True)
+        decision = [(pair[w]["named"], pair[w]["misspecified"]) for w in (1, after)]
+        same += decision[0] == decision[1]
+        rows.append({"hidden": hidden, "seed": seed, "named": pair[1]["named"], "misspecified": pair[1]["misspecified"],
+                     "same_decision": decision[0] == decision[1],
+                     **{f"wall_s_w{w}": pair[w]["wall_time_s"] for w in (1, after)},
+                     **{f"stages_s_w{w}": (pair[w]["timing"] or {}).get("stages_s") for w in (1, after)}})
+
+    def stats(key: str) -> dict[str, float]:
+        values = [r[key] for r in rows]
+        return {"median": statistics.median(values), "max": max(values)}
+
+    return {"workers_after": after, "cases": len(rows), "same_decisions": same,
+            "wall_s_before": stats("wall_s_w1"), "wall_s_after": stats(f"wall_s_w{after}"), "rows": rows}
 
 
 def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, dict[str, Any]]:
@@ -508,6 +548,10 @@ def main() -> None:
                         help="with --ladder-only: the diagnosis' simulations the ladder's budget is a share of "
                              "(536: the 24-trial flag table's)")
     parser.add_argument("--reveal", action="store_true", help="with --ladder-only: also another view")
+    parser.add_argument("--timing", action="store_true",
+                        help="diagnose each case twice, in one process and with --workers; wall times and "
+                             "whether the decisions agree (exit 1 if any differs)")
+    parser.add_argument("--workers", type=int, default=None, help="with --timing: processes after (default: CPUs)")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 
@@ -528,6 +572,10 @@ def main() -> None:
         print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "cases": rows}))
         return
     all_cases = case_list(args, effects)
+    if args.timing:
+        timing = run_timing(args, all_cases)
+        print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), **timing}))
+        sys.exit(0 if timing["same_decisions"] == timing["cases"] else 1)
     start = time.perf_counter()
     cases = []
     if args.merge:

@@ -441,3 +441,22 @@ def test_every_stage_proposes_its_trials_in_batches(tmp_path: Path, pendulum_bat
     assert pendulum_batch_sizes.count(2) >= 2 * 3, pendulum_batch_sizes
     trials = (tmp_path / "diag-quadratic_drag" / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()
     assert len(trials) == 5
+
+
+def test_a_wide_video_is_framed_before_every_stage(tmp_path: Path):
+    """As refine does: a target that is not square is cropped to the renderer's framing first."""
+    from physinfer.video import read_video, write_video
+
+    square = read_video(_pendulum_target(tmp_path, "quadratic_drag"))
+    frames = square.frames
+    wide = np.concatenate([np.repeat(frames[:, :, :1], 48, axis=2), frames, np.repeat(frames[:, :, -1:], 48, axis=2)],
+                          axis=2)  # fmt: skip
+    target = write_video(tmp_path / "wide.mp4", Clip(np.ascontiguousarray(wide), square.fps))
+    from physinfer.conditioning import Conditioning
+
+    report = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1, calibration_control=False,
+                       limits=False, conditioning=Conditioning())  # fmt: skip
+    prepared = report["target_conditions"]["prepared"]
+    assert "skipped" not in prepared, prepared
+    x, y, w, h = prepared["box"]
+    assert 30 <= x + w / 2 <= 114, prepared  # around the pendulum, in the wide frame's pixels

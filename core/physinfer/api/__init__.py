@@ -266,6 +266,7 @@ def diagnose(
         limits=o.limits,
         limit_config=LimitConfig(reveal=o.reveal),
         scene_set=dict(o.scene_set),
+        conditioning=o.conditioning(),  # framing a wide video; ζ stays the default or --render-set
         workers=o.workers,
         scheduler=o.scheduler,
         progress=progress,

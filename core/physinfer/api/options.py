@@ -168,7 +168,7 @@ class RefineOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions):
 
 
 @dataclass(frozen=True)
-class DiagnoseOptions(ModelOptions, TargetOptions, SearchOptions):
+class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions):
     """``physinfer diagnose``.
 
     Attributes:

@@ -17,7 +17,9 @@ from physinfer.cli.app import (
     EmbedderFramesOpt,
     FixOpt,
     JsonOpt,
+    NoPrepareOpt,
     PluginOpt,
+    RoiOpt,
     SceneSetOpt,
     SeedOpt,
     SelectSeedsOpt,
@@ -119,6 +121,8 @@ def diagnose_cmd(
         ),
     ] = False,
     scene_set: SceneSetOpt = [],  # noqa: B006
+    no_prepare: NoPrepareOpt = False,
+    roi: RoiOpt = None,
     workers: Annotated[
         int | None,
         typer.Option(

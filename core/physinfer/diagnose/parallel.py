@@ -13,9 +13,10 @@ simulations are seeded by the stage alone).
 A job that fails on a worker is only reported: the workflow runs that stage itself and
 meets the failure (or not) where it would have without workers.
 
-Workers build the plugins from their entry points (:func:`physinfer.plugins.load_registry`):
-a registry assembled in code (tests, notebooks registering a plugin by hand) cannot be
-rebuilt there, so :func:`usable_workers` falls back to one process for it.
+Workers build the plugins from their entry points (:func:`physinfer.plugins.load_registry`),
+or with the settings' ``registry_factory`` when one is given: a registry assembled in code
+(a notebook registering a phenomenon by hand) cannot be rebuilt otherwise, so
+:func:`usable_workers` falls back to one process for a plugin not installed.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.diagnose.progress import StageClock, StageProgress
 from physinfer.diagnose.stages import (
     GapContext,
     ablated_stage,
@@ -43,6 +45,8 @@ from physinfer.roles import Target
 
 if TYPE_CHECKING:
     from physinfer.diagnose.workflow import DiagnoseSettings
+
+Log = Callable[[str], None]
 
 #: Seconds between looks at the stages' trial logs for the progress display.
 POLL_S = 0.5
@@ -151,14 +155,22 @@ def _worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
     key = (
         settings.plugin, settings.embedder, str(settings.weights), settings.device, settings.duration_s,
         settings.embedder_frames, settings.fixed, tuple(sorted(settings.scene_set.items())),
+        repr(settings.registry_factory),
     )  # fmt: skip
     cache: dict[tuple, tuple[Any, Any]] = _local.__dict__.setdefault("pipelines", {})
     if key not in cache:
-        from physinfer.plugins import load_registry
-
-        registry = scene_registry(load_registry()[0], settings)
+        registry = scene_registry(_installed(settings), settings)
         cache[key] = (registry, build_base(registry, settings))
     return cache[key]
+
+
+def _installed(settings: DiagnoseSettings) -> Any:
+    """The registry a worker can build: the settings' factory's, or the installed plugins'."""
+    if settings.registry_factory is not None:
+        return settings.registry_factory()
+    from physinfer.plugins import load_registry
+
+    return load_registry()[0]
 
 
 def scene_registry(registry: Any, settings: DiagnoseSettings) -> Any:
@@ -187,9 +199,7 @@ def usable_workers(
     if workers < 2:
         return 1, None
     try:
-        from physinfer.plugins import load_registry
-
-        installed = load_registry()[0]
+        installed = _installed(settings)
         installed.phenomenon(settings.plugin)
         for name in effects:
             installed.effect(name, phenomenon=settings.plugin)
@@ -234,6 +244,45 @@ def prefetch_stages(
                         say(f"      {job.stages[0][0]} failed on a worker ({type(exc).__name__}: {exc}); "
                             "running it here")  # fmt: skip
     return seconds
+
+
+def run_on_workers(
+    settings: DiagnoseSettings,
+    effects: Sequence[str],
+    baseline_best: Mapping[str, float],
+    target: Target,
+    target_embedding: np.ndarray,
+    seeds: Sequence[int],
+    steps: int,
+    effect_steps: int,
+    target_label: str,
+    bars: StageProgress,
+    clock: StageClock,
+    say: Log,
+) -> dict[str, Any]:
+    """Run the stages after the baseline on workers when more than one is usable; how they ran."""
+    jobs = stage_jobs(
+        settings, effects, baseline_best=baseline_best, target=target, target_embedding=target_embedding,
+        seeds=seeds, steps=steps, effect_steps=effect_steps, target_label=target_label,
+    )  # fmt: skip
+    workers, why_not = usable_workers(settings, len(jobs), effects)
+    if why_not:
+        say(f"      {why_not}")
+    if workers < 2:
+        return {"workers": 1, "scheduler": None}
+    where = (
+        f"the Dask cluster at {settings.scheduler}"
+        if settings.scheduler
+        else f"{workers} worker processes"
+    )
+    say(f"      the {len(jobs)} stages after the baseline run side by side on {where}")
+    with clock.stage("side_by_side"):
+        clock.add(
+            prefetch_stages(
+                jobs, workers, scheduler=settings.scheduler, on_progress=bars.update, say=say
+            )
+        )
+    return {"workers": workers, "scheduler": settings.scheduler}
 
 
 @contextmanager

@@ -26,14 +26,12 @@ and the pass through the stages below reads them back from disk.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from physinfer.diagnose.candidates import augmented_pipeline
+from physinfer.conditioning import Conditioning
 from physinfer.diagnose.decide import (
     DecisionRule,
     effect_significance,
@@ -43,9 +41,11 @@ from physinfer.diagnose.decide import (
     null_scale,
     self_consistency_gap,
 )
-from physinfer.diagnose.gap import gap_numbers, measure_gap
+from physinfer.diagnose.limit_stage import diagnosis_simulations, run_limits
 from physinfer.diagnose.limits import LimitConfig
-from physinfer.diagnose.localise import LocaliseConfig, localise
+from physinfer.diagnose.localise import LocaliseConfig
+from physinfer.diagnose.outputs import write_outputs
+from physinfer.diagnose.parallel import run_on_workers, scene_registry
 from physinfer.diagnose.progress import StageClock, StageProgress
 from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
     CALIBRATION_SEED_STRIDE,
@@ -64,14 +64,13 @@ from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and St
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir
 from physinfer.locking import LOCK_FILE, exclusive_directory
-from physinfer.noise import NoiseFloor, noise_seeds
+from physinfer.noise import noise_seeds
 from physinfer.parameters import refuse_repeats
-from physinfer.refine import Pipeline, RefineConfig, RefineResult
+from physinfer.refine import Pipeline, RefineConfig
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RUN_FILE
 from physinfer.scene import scene_of
-from physinfer.session import fixed_by_user, full_parameter_space, optional_settings
 
 Log = Callable[[str], None]
 
@@ -131,6 +130,13 @@ class DiagnoseSettings:
         scheduler: A Dask scheduler address whose workers run those stages instead (they
             must have the plugins installed and see ``out``).
         progress: Draw a progress bar per stage on stderr.
+        conditioning: How a ``target_path`` video is framed (:mod:`physinfer.conditioning`:
+            a video that is not square is cropped to the renderer's framing, as ``refine``
+            does; ``None``: used as it is). Recorded in the report (``target_conditions``).
+        registry_factory: How a worker process builds the registry: a picklable callable
+            returning one (``None``: the installed plugins, as
+            :func:`physinfer.plugins.load_registry` finds them). Give one when the
+            registry passed to :func:`run_diagnosis` holds phenomena registered in code.
     """
 
     plugin: str
@@ -166,6 +172,8 @@ class DiagnoseSettings:
     workers: int | None = None
     scheduler: str | None = None
     progress: bool = False
+    conditioning: Conditioning | None = None
+    registry_factory: Callable[[], Any] | None = None
 
     def validate(self) -> None:
         """Raise :class:`UserInputError` naming the first bad setting."""
@@ -208,7 +216,6 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     check_diagnosis_out(settings.out)
     registry.get("optimizers", settings.optimizer)  # fail early, listing the installed ones
     start_time = time.perf_counter()
-    from physinfer.diagnose.parallel import scene_registry
 
     registry = scene_registry(registry, settings)  # every model is built for the scene
     base, target = _load(registry, settings)
@@ -222,6 +229,8 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
         report = _diagnose(registry, settings, base, target, effect_objs, log or (lambda _msg: None))
         if (scene := scene_of(phenomenon)) is not None:
             report["scene"] = scene
+        if target.conditions:
+            report["target_conditions"] = target.conditions
         report["wall_time_s"] = time.perf_counter() - start_time
         atomic_write_json(settings.out / "diagnosis.json", report)
         from physinfer.report import write_report_quietly  # report.html; a failure only warns
@@ -236,7 +245,7 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
     base = build_base(registry, settings)
     target = load_target(
         base, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
-        fixed=settings.fixed,
+        fixed=settings.fixed, conditioning=settings.conditioning,
     )  # fmt: skip
     return base, target
 
@@ -300,7 +309,7 @@ def _diagnose_stages(
     # The stages below start from the baseline's fit and not from each other: side by side
     # on workers first, if there are any; the pass below then reads them from disk.
     adopt_single_calibration(settings.out)
-    workers = _run_on_workers(
+    workers = run_on_workers(
         settings, list(effect_objs), baseline.best_params, target, target_embedding, seeds, steps, effect_steps,
         target_label, bars, clock, say,
     )  # fmt: skip
@@ -391,11 +400,11 @@ def _diagnose_stages(
     say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
     limits = None
     if settings.limits:
-        n_sims = _diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], calibration,
+        n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], calibration,
                                         n_gaps=2 + len(calibration) * (2 if settings.calibration_control else 1)
                                         + 2 * len(effect_objs))
         with clock.stage("limits"):
-            limits = _limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
+            limits = run_limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
         for cand in candidates:
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
@@ -403,7 +412,7 @@ def _diagnose_stages(
     say("[6/6] localising and writing outputs")
 
     with clock.stage("outputs"):
-        report = _outputs(
+        report = write_outputs(
             settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
             baseline,
         )
@@ -411,232 +420,3 @@ def _diagnose_stages(
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
-
-
-def _run_on_workers(
-    settings: DiagnoseSettings,
-    effects: Sequence[str],
-    baseline_best: Mapping[str, float],
-    target: Target,
-    target_embedding: np.ndarray,
-    seeds: Sequence[int],
-    steps: int,
-    effect_steps: int,
-    target_label: str,
-    bars: StageProgress,
-    clock: StageClock,
-    say: Log,
-) -> dict[str, Any]:
-    """Run the stages after the baseline on workers when more than one is usable; how they ran."""
-    from physinfer.diagnose.parallel import prefetch_stages, stage_jobs, usable_workers
-
-    jobs = stage_jobs(
-        settings, effects, baseline_best=baseline_best, target=target, target_embedding=target_embedding,
-        seeds=seeds, steps=steps, effect_steps=effect_steps, target_label=target_label,
-    )  # fmt: skip
-    workers, why_not = usable_workers(settings, len(jobs), effects)
-    if why_not:
-        say(f"      {why_not}")
-    if workers < 2:
-        return {"workers": 1, "scheduler": None}
-    where = f"the Dask cluster at {settings.scheduler}" if settings.scheduler else f"{workers} worker processes"
-    say(f"      the {len(jobs)} stages after the baseline run side by side on {where}")
-    with clock.stage("side_by_side"):
-        clock.add(prefetch_stages(jobs, workers, scheduler=settings.scheduler, on_progress=bars.update, say=say))
-    return {"workers": workers, "scheduler": settings.scheduler}
-
-
-def _diagnosis_simulations(settings: DiagnoseSettings, results: Sequence[RefineResult],
-                           calibration: Sequence[Mapping[str, Any]], n_gaps: int) -> int:
-    """Simulations a diagnosis costs: trials, selection re-simulations, gap measurements (the ladder's budget)."""
-    stages = len(results) + len(calibration) * (2 if settings.calibration_control else 1)
-    per_stage_trials = sum(r.n_trials for r in results) / max(len(results), 1)
-    steps = settings.steps or per_stage_trials
-    effect_steps = settings.effect_steps or steps
-    calibration_trials = len(calibration) * (steps + (effect_steps if settings.calibration_control else 0))
-    select = settings.select_top * settings.select_seeds * stages
-    return int(sum(r.n_trials for r in results) + calibration_trials + select + n_gaps * settings.floor_samples)
-
-
-def _limits(
-    registry: Registry,
-    settings: DiagnoseSettings,
-    base: Pipeline,
-    target: Target,
-    before: Stage,
-    effect_objs: Mapping[str, Any],
-    scale: float,
-    n_sims: int,
-    say: Log,
-) -> dict[str, Any]:
-    """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``."""
-    import dataclasses
-    import json
-
-    from physinfer.diagnose.limits import LimitInputs, detection_limits
-
-    theta = before.best_params
-    fixed = fixed_by_user(base, settings.fixed)
-    key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": float(scale),
-           "effects": sorted(effect_objs), "config": settings.limit_config.to_dict(), "seed": settings.seed,
-           "rule": dataclasses.asdict(settings.rule), "floor_samples": settings.floor_samples}
-    path = settings.out / "limits.json"
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored["limits"]
-    embeddings = np.asarray(before.gap.embeddings)
-    if embeddings.ndim != 2 or len(embeddings) < 2:  # a gap measured before embeddings were kept
-        seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
-        embeddings = measure_gap(base, theta, target.render_params, np.zeros(1), seeds=seeds).embeddings
-    augmented = {name: augmented_pipeline(base, [effect], settings.duration_s, fixed)
-                 for name, effect in effect_objs.items()}
-
-    def make_longer(seconds: float) -> tuple[Any, dict[str, Any], Any]:
-        from physinfer.session import build_pipeline
-
-        frames = settings.embedder_frames or getattr(base.embedder, "n_frames", None)
-        longer = build_pipeline(
-            registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
-            duration_s=2 * seconds, embedder_frames=None if frames is None else 2 * int(frames), fixed=settings.fixed,
-        )  # fmt: skip
-        sims = {name: augmented_pipeline(longer, [e], 2 * seconds, fixed).simulator for name, e in effect_objs.items()}
-        return longer.simulator, sims, longer.embedder
-
-    say(f"      detection limits: a ladder of {len(settings.limit_config.fractions)} strengths per effect "
-        "at the best baseline fit")
-    inputs = LimitInputs(
-        base=base, augmented=augmented, theta=theta, base_embeddings=embeddings, render_params=target.render_params,
-        scale=scale, rule=settings.rule, floor_samples=settings.floor_samples, seed=settings.seed,
-        diagnosis_simulations=n_sims, make_longer=make_longer,
-    )
-    limits = detection_limits(inputs, settings.limit_config, log=say)
-    atomic_write_json(path, {"key": key, "limits": limits})
-    return json.loads(path.read_text())["limits"]  # as a resumed diagnosis reads it (NaN as null)
-
-
-def _outputs(
-    settings: DiagnoseSettings,
-    target: Target,
-    stages: Sequence[Stage],
-    before: Stage,
-    after: Stage,
-    named: str | None,
-    candidates: list[dict[str, Any]],
-    verdict: dict[str, Any],
-    scale: float,
-    gap0: NoiseFloor,
-    self_gap: float | None,
-    calibration: Sequence[Mapping[str, Any]],
-    baseline: RefineResult,
-) -> dict[str, Any]:
-    """Localise, draw, write the model file and videos; assemble the report."""
-    from physinfer.diagnose.figures import plot_gaps, plot_maps
-    from physinfer.diagnose.model import write_model
-
-    out = settings.out
-    fit_before = clip_of(before.pipeline, before.best_params, target, settings.seed)
-    numbers, t_maps, b_maps = localise(target.clip, fit_before, settings.localise)
-    rows = [("target", t_maps), ("baseline fit", b_maps)]
-    clips = [target.clip, fit_before]
-    after_numbers = None
-    if named:
-        fit_after = clip_of(after.pipeline, after.best_params, target, settings.seed)
-        after_numbers, _, a_maps = localise(target.clip, fit_after, settings.localise)
-        rows.append((f"+ {named}", a_maps))
-        clips.append(fit_after)
-    figures = {
-        "maps": str(plot_maps(rows, out / "maps.png")),
-        "gaps": str(
-            plot_gaps(
-                [
-                    {"label": s.label if s is not before else "baseline (best)", "gap": float(s.gap.gap),
-                     "distances": list(s.gap.to_target or [])}
-                    for s in [before, *stages[1:]]
-                ],
-                floor=before.gap.floor,
-                scale=scale,
-                threshold=verdict["threshold"],
-                named=named,
-                path=out / "gaps.png",
-            )
-        ),
-    }
-    videos = {}
-    if settings.videos:
-        from physinfer.video import side_by_side, write_video
-
-        videos["side_by_side"] = str(write_video(out / "side_by_side.mp4", side_by_side(clips)))
-    fixed = fixed_by_user(after.pipeline, settings.fixed)
-    model = write_model(
-        out / "model.json",
-        plugin=settings.plugin,
-        effects=[e.name for e in after.pipeline.effects],
-        space=full_parameter_space(after.pipeline, settings.fixed),  # every parameter, the fixed ones at their values
-        values={**after.best_params, **fixed},
-        gap=float(after.gap.gap),
-        source=after.result.run_dir,
-        **optional_settings(fixed, settings.duration_s, settings.embedder_frames),  # what the values were fitted under
-        **({"scene": scene} if (scene := scene_of(after.pipeline.phenomenon)) is not None else {}),
-    )
-    gap_after = float(after.gap.gap)
-    gap_before = float(before.gap.gap)
-    return {
-        "plugin": settings.plugin,
-        "target": str(settings.target_path) if settings.target_path else "default",
-        "truth": target.truth,
-        "misspecified": verdict["misspecified"],
-        "misspecified_by": verdict["evidence"],
-        "gap_test": verdict["gap_test"],
-        "named_effect": named,
-        "gap_before": gap_before,
-        "gap_after": gap_after,
-        "gap_ratio": gap_after / gap_before if gap_before > 0 else None,
-        "noise_floor": before.gap.floor,
-        "null_scale": scale,
-        "threshold": verdict["threshold"],
-        "self_consistency_gap": self_gap,
-        "self_consistency_gaps": [run["gap"] for run in calibration],
-        "calibration": [dict(run) for run in calibration],
-        "tested_gap": verdict["tested_gap"],
-        "baseline": {
-            "best_params": baseline.best_params,
-            "best_distance": baseline.best_distance,
-            **gap_numbers(gap0),
-            "run_dir": baseline.run_dir,
-        },
-        "control": {"best_params": stages[0].best_params, **gap_numbers(stages[0].gap), "run_dir": stages[0].result.run_dir},
-        "best_baseline": {"source": before.label, "best_params": before.best_params, **gap_numbers(before.gap)},
-        "candidates": candidates,
-        "regions": numbers["regions"],
-        "localisation": numbers["global"],
-        "regions_after": None if after_numbers is None else after_numbers["regions"],
-        "model_file": str(out / "model.json"),
-        "model": {"effects": list(model.effects), "values": model.values},
-        "figures": figures,
-        "videos": videos,
-        "settings": {
-            "steps": baseline.n_trials,
-            "effect_steps": stages[0].result.n_trials,
-            "optimizer": settings.optimizer,
-            "seed": settings.seed,
-            "floor_samples": settings.floor_samples,
-            "select_top": settings.select_top,
-            "select_seeds": settings.select_seeds,
-            "batch_size": settings.batch_size,
-            "calibrate": settings.calibrate,
-            "calibration_runs": settings.calibration_runs if settings.calibrate else 0,
-            "calibration_control": settings.calibrate and settings.calibration_control,
-            "duration_s": settings.duration_s,
-            "embedder_frames": settings.embedder_frames,
-            "fixed": fixed_by_user(before.pipeline, settings.fixed),
-            "rule": {
-                "misspecified_factor": settings.rule.misspecified_factor,
-                "alpha": settings.rule.alpha,
-                "per_parameter_factor": settings.rule.per_parameter_factor,
-                "calibration_summary": settings.rule.calibration_summary,
-                "effect_evidence": settings.rule.effect_evidence,
-            },
-        },
-        "seeds_checked": [int(s) for s in np.asarray(before.gap.seeds)],
-    }

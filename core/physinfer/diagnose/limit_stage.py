@@ -1,0 +1,127 @@
+"""A diagnosis' detection-limit stage: each candidate's ladder at the best baseline fit,
+cached in ``limits.json`` (the method is :mod:`physinfer.diagnose.limits`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from physinfer.diagnose.candidates import augmented_pipeline
+from physinfer.diagnose.gap import measure_gap
+from physinfer.diagnose.stages import Stage
+from physinfer.io import atomic_write_json
+from physinfer.noise import noise_seeds
+from physinfer.refine import Pipeline, RefineResult
+from physinfer.registry import Registry
+from physinfer.roles import Target
+from physinfer.session import fixed_by_user
+
+if TYPE_CHECKING:
+    from physinfer.diagnose.workflow import DiagnoseSettings
+
+Log = Callable[[str], None]
+
+
+def diagnosis_simulations(
+    settings: DiagnoseSettings,
+    results: Sequence[RefineResult],
+    calibration: Sequence[Mapping[str, Any]],
+    n_gaps: int,
+) -> int:
+    """Simulations a diagnosis costs: trials, selection re-simulations, gap measurements (the ladder's budget)."""
+    stages = len(results) + len(calibration) * (2 if settings.calibration_control else 1)
+    per_stage_trials = sum(r.n_trials for r in results) / max(len(results), 1)
+    steps = settings.steps or per_stage_trials
+    effect_steps = settings.effect_steps or steps
+    calibration_trials = len(calibration) * (
+        steps + (effect_steps if settings.calibration_control else 0)
+    )
+    select = settings.select_top * settings.select_seeds * stages
+    return int(
+        sum(r.n_trials for r in results)
+        + calibration_trials
+        + select
+        + n_gaps * settings.floor_samples
+    )
+
+
+def run_limits(
+    registry: Registry,
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    target: Target,
+    before: Stage,
+    effect_objs: Mapping[str, Any],
+    scale: float,
+    n_sims: int,
+    say: Log,
+) -> dict[str, Any]:
+    """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``."""
+    import dataclasses
+    import json
+
+    from physinfer.diagnose.limits import LimitInputs, detection_limits
+
+    theta = before.best_params
+    fixed = fixed_by_user(base, settings.fixed)
+    key = {
+        "theta": {k: float(v) for k, v in theta.items()},
+        "scale": float(scale),
+        "effects": sorted(effect_objs),
+        "config": settings.limit_config.to_dict(),
+        "seed": settings.seed,
+        "rule": dataclasses.asdict(settings.rule),
+        "floor_samples": settings.floor_samples,
+    }
+    path = settings.out / "limits.json"
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key:
+            return stored["limits"]
+    embeddings = np.asarray(before.gap.embeddings)
+    if embeddings.ndim != 2 or len(embeddings) < 2:  # a gap measured before embeddings were kept
+        seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
+        embeddings = measure_gap(
+            base, theta, target.render_params, np.zeros(1), seeds=seeds
+        ).embeddings
+    augmented = {
+        name: augmented_pipeline(base, [effect], settings.duration_s, fixed)
+        for name, effect in effect_objs.items()
+    }
+
+    def make_longer(seconds: float) -> tuple[Any, dict[str, Any], Any]:
+        from physinfer.session import build_pipeline
+
+        frames = settings.embedder_frames or getattr(base.embedder, "n_frames", None)
+        longer = build_pipeline(
+            registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
+            duration_s=2 * seconds, embedder_frames=None if frames is None else 2 * int(frames), fixed=settings.fixed,
+        )  # fmt: skip
+        sims = {
+            name: augmented_pipeline(longer, [e], 2 * seconds, fixed).simulator
+            for name, e in effect_objs.items()
+        }
+        return longer.simulator, sims, longer.embedder
+
+    say(
+        f"      detection limits: a ladder of {len(settings.limit_config.fractions)} strengths per effect "
+        "at the best baseline fit"
+    )
+    inputs = LimitInputs(
+        base=base,
+        augmented=augmented,
+        theta=theta,
+        base_embeddings=embeddings,
+        render_params=target.render_params,
+        scale=scale,
+        rule=settings.rule,
+        floor_samples=settings.floor_samples,
+        seed=settings.seed,
+        diagnosis_simulations=n_sims,
+        make_longer=make_longer,
+    )
+    limits = detection_limits(inputs, settings.limit_config, log=say)
+    atomic_write_json(path, {"key": key, "limits": limits})
+    return json.loads(path.read_text())["limits"]  # as a resumed diagnosis reads it (NaN as null)
