@@ -312,8 +312,9 @@ def _run_refinement(
         run_dir.create(run_info, overwrite=bool(run_info.get("overwrite")))
         records = []
     sem = observation_noise(pipeline, target, target_embedding, run_dir, config)
-    optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
-    _replay(optimizer, records, config, sem)
+    if len(records) < config.steps:  # a finished run (read back by diagnose) needs no optimizer
+        optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
+        _replay(optimizer, records, config, sem)
     seeds = config.trial_seeds()
     best = min((r.distance for r in records if r.distance is not None), default=float("inf"))
 
