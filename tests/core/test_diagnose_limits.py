@@ -246,7 +246,7 @@ def test_three_clip_lengths_are_monotone_in_the_median_over_ladder_seeds(pendulu
     """0.8, 1.6 and 3.2 s: each doubling lowers the limit by 10-20 %, less than one estimate's
     spread (measured with six seeds per rung over ladder seeds 0-3: 0.53-0.73, 0.40-0.71,
     0.42-0.50 of the range), so only the median of several estimates is monotone (0.65,
-    0.53, 0.47). About 3 minutes."""
+    0.53, 0.47). About 4 minutes on the shared 2-core machine."""
     medians = [
         float(np.median([_drag_limit(pendulum, 0.1, n, seeds=6, seed=s) for s in range(4)]))
         for n in (20, 40, 80)

@@ -13,9 +13,10 @@ squared distances the noise adds: ``A = S + floor_rung − floor``, where ``floo
 the median distance among the rung's own clips (free: they are already simulated) and
 ``floor`` that among θ̂'s re-simulations — counted only when ``floor_rung`` exceeds the 95th
 percentile of θ̂'s distances (a rung has only a pair or a few of clips, and a deterministic
-effect's threshold must not rise by chance). On an 8-s flag at gust intensity
-0.5 the rung's clips differ by 16× the baseline's floor — more than the rung is shifted
-from θ̂ — which is why no 8-s gust diagnosis named gusts although the shift cleared ``S``.
+effect's threshold must not rise by chance). On 8-s flags at gust intensity 0.5
+the rung's clips differ by 8-15× θ̂'s floor — more than the rung is shifted from θ̂ — which
+is why no gust diagnosis named gusts although the shift cleared ``S``. The same holds for a
+deterministic effect that makes the motion more chaotic (a strong updraft).
 """
 
 from __future__ import annotations
