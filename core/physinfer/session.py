@@ -29,6 +29,7 @@ from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord
 from physinfer.scene import scene_of
+from physinfer.threads import with_refinement_threads
 
 
 def optional_settings(
@@ -77,6 +78,7 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
 
 
 
+@with_refinement_threads
 def refine(
     registry: Registry,
     *,

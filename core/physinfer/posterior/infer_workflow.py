@@ -20,6 +20,7 @@ from physinfer.posterior.estimator import PosteriorEstimator
 from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
 from physinfer.posterior.summary import correlations, marginals
 from physinfer.registry import Registry
+from physinfer.threads import with_refinement_threads
 
 
 @dataclass
@@ -107,6 +108,7 @@ def posterior_of_clip(
     return report
 
 
+@with_refinement_threads
 def infer(
     registry: Registry,
     *,
