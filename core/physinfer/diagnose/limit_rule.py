@@ -249,8 +249,14 @@ def effect_limit(
 def _why_not(
     top: Mapping[str, Any], space: ParameterSpace, jac: np.ndarray, tau: float, floor: float
 ) -> tuple[str, list[str]]:
-    """The reason the strongest rung is not detectable, and the base parameters that mimic it."""
-    if top["shift"] > top["threshold"]:
+    """The reason the strongest rung is not detectable, and the base parameters that mimic it.
+
+    Mimicked when the refit undoes a shift that clears the rung's own threshold, or brings
+    one that clears a deterministic effect's ``tau`` below it (whatever the rung's own noise
+    adds: on an 8-s flag a 30° updraft did both); hidden by its own randomness when only the
+    rung's own noise keeps the refit gap below its threshold.
+    """
+    if top["shift"] > top["threshold"] or top["shift"] > tau >= top["refit_gap"]:
         mimicked_by = movers(space, top["delta"], jac)
         return f"mimicked by {' and '.join(mimicked_by) or 'the base parameters'}", mimicked_by
     if top["shift"] > tau:
