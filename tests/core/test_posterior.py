@@ -117,12 +117,9 @@ def test_correlations_show_a_ridge_and_nothing_for_independent_parameters():
 # ----------------------------------------------------------------- saving and loading
 
 
-@pytest.fixture(scope="module")
-def toy_estimator():
-    """A small NPE (sbi, maf) trained on x = θ + noise in 2-D, in seconds."""
-    from physinfer.posterior.estimator import NetworkConfig
+def _toy_pairs_and_identity():
+    """400 pairs x = (θ + noise, distractor) in a 2-D space, and an estimator identity."""
     from physinfer.posterior.features import EmbeddedSet
-    from physinfer.posterior.training import train_estimator
 
     space = ParameterSpace(
         [ParameterSpec("a", (0.0, 1.0)), ParameterSpec("b", (1.0, 100.0), scaling="log")]
@@ -141,10 +138,51 @@ def toy_estimator():
         "probe": [0.0, 1.0, 2.0],
         "clip_seconds": 0.4,
     }
+    return pairs, identity
+
+
+@pytest.fixture(scope="module")
+def toy_estimator():
+    """A small NPE (sbi, maf) trained on x = θ + noise in 2-D, in seconds."""
+    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.training import train_estimator
+
+    pairs, identity = _toy_pairs_and_identity()
     network = NetworkConfig(
         hidden_features=32, num_transforms=3, batch_size=50, learning_rate=2e-3, max_epochs=40
     )
     return train_estimator(pairs, identity, network=network, seed=0, device="cpu")
+
+
+def test_an_ensemble_is_a_mixture_of_its_seeded_flows_and_round_trips(tmp_path):
+    import torch
+
+    from physinfer.posterior.estimator import FlowEnsemble, NetworkConfig, PosteriorEstimator
+    from physinfer.posterior.training import train_estimator
+
+    pairs, identity = _toy_pairs_and_identity()
+    network = NetworkConfig(
+        density="maf", hidden_features=8, num_transforms=2, learning_rate=2e-3, max_epochs=3,
+        ensemble=2,
+    )  # fmt: skip
+    est = train_estimator(pairs, identity, network=network, seed=5, device="cpu")
+    assert isinstance(est.network, FlowEnsemble) and len(est.network.members) == 2
+    assert len(est.config.training["epochs"]) == 2
+    first, second = (dict(m.named_parameters()) for m in est.network.members)
+    assert any(not torch.equal(first[k], second[k]) for k in first)  # two seeds, two flows
+    # The mixture draws half its samples from each flow, in member order.
+    x = torch.tensor([[0.5, -0.5, 0.0]])
+    torch.manual_seed(1)
+    both = est.network.sample((6,), condition=x)
+    torch.manual_seed(1)
+    parts = [m.sample((3,), condition=x) for m in est.network.members]
+    torch.testing.assert_close(both, torch.cat(parts))
+    loaded = PosteriorEstimator.load(est.save(tmp_path / "ens.safetensors"))
+    assert loaded.config == est.config
+    xs = x.numpy()[0]
+    np.testing.assert_allclose(
+        loaded.sample_unit(xs, 100, seed=2), est.sample_unit(xs, 100, seed=2), atol=1e-6
+    )
 
 
 def test_an_estimator_round_trips_through_its_file_and_samples_alike(toy_estimator, tmp_path):
@@ -390,7 +428,9 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
 def _one_identified_space_and_amortized(rng):
     """``a`` identified (amortized samples around 0.2 ± 0.15 in unit coordinates), ``b`` not."""
     space = ParameterSpace([ParameterSpec("a", (0.0, 10.0)), ParameterSpec("b", (1.0, 2.0))])
-    samples = np.stack([np.clip(0.2 + 0.15 * rng.normal(size=4000), -1, 1), rng.uniform(-1, 1, 4000)], axis=1)
+    samples = np.stack(
+        [np.clip(0.2 + 0.15 * rng.normal(size=4000), -1, 1), rng.uniform(-1, 1, 4000)], axis=1
+    )
     return space, samples, marginals(samples, space)
 
 
@@ -452,7 +492,14 @@ def test_refine_prints_digits_only_for_what_the_video_determines():
     from physinfer.refine import RefineResult
 
     def marginal(label: str) -> dict:
-        return {"median": 5.0, "ci50": [4.5, 5.5], "ci90": [4.0, 6.0], "contraction": 0.9, "label": label, "unit": ""}
+        return {
+            "median": 5.0,
+            "ci50": [4.5, 5.5],
+            "ci90": [4.0, 6.0],
+            "contraction": 0.9,
+            "label": label,
+            "unit": "",
+        }
 
     result = RefineResult(
         best_params={"wind": 5.2, "weight": 0.17, "bend": 9.9}, best_distance=0.02, best_step=3,
@@ -466,7 +513,9 @@ def test_refine_prints_digits_only_for_what_the_video_determines():
     )  # fmt: skip
     text = "\n".join(refine_result_lines(result))
     assert "wind = 5.2   posterior 5 [90 %: 4 – 6]   identified   (truth 5, error 0.2)" in text
-    assert "not identified (the video barely narrows their ranges" in text and "weight, bend" in text
+    assert (
+        "not identified (the video barely narrows their ranges" in text and "weight, bend" in text
+    )
     assert "error 8.9" not in text and "bound" not in text  # no digits, no bound warning for them
     assert "posterior: refined by this run's trials" in text and "est.safetensors" in text
 

@@ -26,14 +26,20 @@ from physinfer.cli.app import (
     registry_and_infos,
 )
 
-posterior_app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+posterior_app = typer.Typer(
+    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False
+)
 
 DeviceOpt = Annotated[
-    str | None, typer.Option("--device", help="torch device: cpu, cuda, cuda:N (default: cuda if present).")
+    str | None,
+    typer.Option("--device", help="torch device: cpu, cuda, cuda:N (default: cuda if present)."),
 ]
 PosteriorOpt = Annotated[
     Path | None,
-    typer.Option("--posterior", help="Estimator file from `physinfer posterior train` (default: the plugin's shipped one)."),
+    typer.Option(
+        "--posterior",
+        help="Estimator file from `physinfer posterior train` (default: the plugin's shipped one).",
+    ),
 ]
 
 
@@ -66,22 +72,44 @@ def _stage_progress(enabled: bool = True) -> Iterator[object]:
 @handle_errors()
 def train_cmd(
     plugin: PluginOpt,
-    data: Annotated[Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")],
+    data: Annotated[
+        Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")
+    ],
     out: Annotated[Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")],
-    embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
-    embedder_frames: Annotated[
-        int | None, typer.Option("--embedder-frames", help="Frames a parameter-free embedder reads.")
+    embedder: Annotated[
+        str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")
     ] = None,
-    weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
+    embedder_frames: Annotated[
+        int | None,
+        typer.Option("--embedder-frames", help="Frames a parameter-free embedder reads."),
+    ] = None,
+    weights: Annotated[
+        Path | None, typer.Option("--weights", help="Embedder weights file.")
+    ] = None,
     split: Annotated[str, typer.Option("--split", help="Dataset split to train on.")] = "train",
     density: Annotated[
-        str, typer.Option("--density", help="Density estimator: nsf (neural spline flow), maf or mdn.")
+        str,
+        typer.Option("--density", help="Density estimator: nsf (neural spline flow), maf or mdn."),
     ] = "nsf",
-    max_epochs: Annotated[int, typer.Option("--max-epochs", help="Upper bound on training epochs.")] = 400,
+    max_epochs: Annotated[
+        int, typer.Option("--max-epochs", help="Upper bound on training epochs.")
+    ] = 400,
     patience: Annotated[
-        int, typer.Option("--patience", help="Stop after this many epochs without a better validation loss.")
+        int,
+        typer.Option(
+            "--patience", help="Stop after this many epochs without a better validation loss."
+        ),
     ] = 60,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")
+    ] = 0,
+    ensemble: Annotated[
+        int,
+        typer.Option(
+            "--ensemble",
+            help="Flows trained with seeds SEED.. SEED+N-1; the posterior is their mixture.",
+        ),
+    ] = 1,
     device: DeviceOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
@@ -94,16 +122,23 @@ def train_cmd(
         result = train_posterior(
             registry, plugin=plugin, data=data, out=out, embedder=embedder, embedder_frames=embedder_frames,
             weights=weights, device=device, split=split,
-            network=NetworkConfig(density=density, max_epochs=max_epochs, stop_after_epochs=patience), seed=seed, progress=progress,
+            network=NetworkConfig(
+                density=density, max_epochs=max_epochs, stop_after_epochs=patience, ensemble=ensemble
+            ),
+            seed=seed, progress=progress,
         )  # fmt: skip
     if as_json:
         emit_json(result.to_dict())
         return
     t = result.estimator.config.training
+    epochs, losses = t["epochs"], t["best_validation_loss"]
+    if isinstance(epochs, list):  # an ensemble: one entry per flow
+        how = f"{len(epochs)} flows, {'/'.join(map(str, epochs))} epochs, validation loss "
+        how += "/".join(f"{v:.3f}" for v in losses)
+    else:
+        how = f"{epochs} epochs (validation loss {losses:.3f})"
     err_console.print(
-        f"trained on {t['pairs']} clips in {t['epochs']} epochs (validation loss {t['best_validation_loss']:.3f}); "
-        f"wrote {result.path}",
-        highlight=False,
+        f"trained on {t['pairs']} clips in {how}; wrote {result.path}", highlight=False
     )
 
 
@@ -114,14 +149,18 @@ def infer_cmd(
         Path | None, typer.Option("--target", help="Video; default: the plugin's embedded target.")
     ] = None,
     posterior: PosteriorOpt = None,
-    fps: Annotated[float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")] = None,
+    fps: Annotated[
+        float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")
+    ] = None,
     truth: Annotated[
-        list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval).")
+        list[str],
+        typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval)."),
     ] = [],  # noqa: B006
     samples: Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")] = 5000,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
     out: Annotated[
-        Path | None, typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png.")
+        Path | None,
+        typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png."),
     ] = None,
     device: DeviceOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
@@ -139,13 +178,16 @@ def infer_cmd(
     if as_json:
         emit_json(report.to_dict())
         return
-    err_console.print(f"[bold]posterior[/] ({report.estimator.name}, {len(report.samples_unit)} samples)")
+    err_console.print(
+        f"[bold]posterior[/] ({report.estimator.name}, {len(report.samples_unit)} samples)"
+    )
     for line in summary_lines(report.marginals):
         err_console.print(line, highlight=False)
     for pair in report.correlations[:3]:
-        err_console.print(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False)
+        err_console.print(
+            f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False
+        )
     err_console.print(f"results in {Path(report.paths['posterior']).parent}")
-
 
 
 @handle_errors()
@@ -154,10 +196,13 @@ def calibration_cmd(
     data: Annotated[Path, typer.Option("--data", help="Dataset of held-out simulations.")],
     posterior: PosteriorOpt = None,
     split: Annotated[str, typer.Option("--split", help="Dataset split to check on.")] = "test",
-    samples: Annotated[int, typer.Option("--samples", help="Posterior samples per simulation.")] = 1000,
+    samples: Annotated[
+        int, typer.Option("--samples", help="Posterior samples per simulation.")
+    ] = 1000,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
     out: Annotated[
-        Path | None, typer.Option("--out", help="Directory for calibration.json and calibration.png.")
+        Path | None,
+        typer.Option("--out", help="Directory for calibration.json and calibration.png."),
     ] = None,
     device: DeviceOpt = None,
     as_json: JsonOpt = False,
@@ -190,4 +235,3 @@ def calibration_cmd(
             highlight=False,
         )
     err_console.print(f"results in {out}")
-

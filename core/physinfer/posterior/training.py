@@ -21,6 +21,7 @@ import torch
 from physinfer.errors import UserInputError
 from physinfer.posterior.estimator import (
     EstimatorConfig,
+    FlowEnsemble,
     NetworkConfig,
     PosteriorEstimator,
     to_unbounded,
@@ -49,15 +50,14 @@ def train_estimator(
         identity: The :class:`EstimatorConfig` fields naming plugin, embedder (name, frames,
             fps, probe) and clip length.
         network: Density estimator and training settings.
-        seed: Seeds torch (initialisation, batches, the validation split).
+        seed: Seeds torch (initialisation, batches, the validation split); member k of an
+            ensemble (``network.ensemble``) uses ``seed + k``.
         device: Torch device to train on.
         on_epoch: Called as ``(epochs_done, max_epochs, best_validation_loss)``.
 
     Raises:
         UserInputError: too few pairs, or settings sbi cannot use.
     """
-    from sbi.inference import NPE
-
     network = network or NetworkConfig()
     network.validate()
     if len(pairs) < MIN_PAIRS:
@@ -65,10 +65,54 @@ def train_estimator(
             f"{len(pairs)} training clips are too few for a posterior estimator (at least {MIN_PAIRS}); "
             "generate more with `physinfer dataset generate --sims N`"
         )
+    theta = torch.from_numpy(
+        to_unbounded(np.asarray(pairs.theta_unit, dtype=np.float64)).astype(np.float32)
+    )
+    x = torch.from_numpy(np.asarray(pairs.x, dtype=np.float32))
+    members, runs = [], []
+    for k in range(network.ensemble):
+        # Member k sees the epochs of those before it: one progress bar over the ensemble.
+        def report(done: int, total: int, best: float, k: int = k) -> None:
+            if on_epoch is not None:
+                on_epoch(k * total + done, network.ensemble * total, best)
+
+        member, run = _train_one(theta, x, network, seed=seed + k, device=device, on_epoch=report)
+        members.append(member)
+        runs.append(run)
+    training = {
+        "pairs": len(pairs),
+        "epochs": runs[0]["epochs"] if len(runs) == 1 else [r["epochs"] for r in runs],
+        "best_validation_loss": runs[0]["best_validation_loss"]
+        if len(runs) == 1
+        else [r["best_validation_loss"] for r in runs],
+        "seed": seed,
+        "device": device,
+    }
+    estimator = members[0] if len(members) == 1 else FlowEnsemble(members)
+    config = EstimatorConfig(
+        **dict(identity),
+        parameters=pairs.parameter_space.to_dict(),
+        x_dim=int(x.shape[1]),
+        network=network,
+    )
+    config = replace(config, training={**config.training, **training})
+    return PosteriorEstimator(config, estimator.cpu(), "cpu")
+
+
+def _train_one(
+    theta: torch.Tensor,
+    x: torch.Tensor,
+    network: NetworkConfig,
+    *,
+    seed: int,
+    device: str,
+    on_epoch: Callable[[int, int, float], None],
+) -> tuple[torch.nn.Module, dict[str, Any]]:
+    """One flow trained with sbi's NPE on ``(atanh θ, x)``; returns it and its epochs and loss."""
+    from sbi.inference import NPE
+
     torch.manual_seed(seed)
     np.random.seed(seed)  # noqa: NPY002 - sbi draws its validation split from torch and numpy
-    theta = torch.from_numpy(to_unbounded(np.asarray(pairs.theta_unit, dtype=np.float64)).astype(np.float32))
-    x = torch.from_numpy(np.asarray(pairs.x, dtype=np.float32))
     # No prior: the flow is trained on atanh(θ) (unbounded), and the dataset's θ already
     # follow the prior, which is all single-round NPE needs.
     inference = NPE(
@@ -83,11 +127,12 @@ def train_estimator(
         "stop_after_epochs": network.stop_after_epochs,
         "show_train_summary": False,
     }
-    estimator = _quiet(inference.train, max_num_epochs=EPOCHS_PER_REPORT, **settings)
+    estimator = _quiet(
+        inference.train, max_num_epochs=min(EPOCHS_PER_REPORT, network.max_epochs), **settings
+    )
     while True:
         best = float(inference._summary["best_validation_loss"][-1])
-        if on_epoch is not None:
-            on_epoch(min(inference.epoch, network.max_epochs), network.max_epochs, best)
+        on_epoch(min(inference.epoch, network.max_epochs), network.max_epochs, best)
         # sbi keeps the best weights at the end of every call; it has converged once the
         # validation loss has not improved for the patience.
         stalled = inference._epochs_since_last_improvement >= network.stop_after_epochs
@@ -95,22 +140,11 @@ def train_estimator(
             break
         target = min(inference.epoch + EPOCHS_PER_REPORT, network.max_epochs)
         estimator = _quiet(inference.train, max_num_epochs=target, resume_training=True, **settings)
-    summary = inference._summary
-    training = {
-        "pairs": len(pairs),
+    run = {
         "epochs": int(inference.epoch),
-        "best_validation_loss": float(summary["best_validation_loss"][-1]),
-        "seed": seed,
-        "device": device,
+        "best_validation_loss": float(inference._summary["best_validation_loss"][-1]),
     }
-    config = EstimatorConfig(
-        **dict(identity),
-        parameters=pairs.parameter_space.to_dict(),
-        x_dim=int(x.shape[1]),
-        network=network,
-    )
-    config = replace(config, training={**config.training, **training})
-    return PosteriorEstimator(config, estimator.cpu(), "cpu")
+    return estimator, run
 
 
 def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
