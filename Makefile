@@ -84,13 +84,14 @@ pretrained: install
 		print(export_weights('runs/sdn-cpu', info={'made_by': 'make pretrained'}))"
 
 # The flag's shipped posterior estimator: 800 training and 200 held-out 2.4-s simulations
-# (resumes; about 25 min on 2 cores), embedded by the shipped SDN (cached beside the data),
-# NPE with sbi (a minute), then the calibration check on the held-out split.
+# (resumes; about 25 min on 2 cores), embedded by the spectral embedder over all 60 frames
+# (cached beside the data), five seeded MAFs with sbi (about a minute), then the calibration
+# check on the held-out split.
 posterior: install
 	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
 		--frames 60 --size 224 --seed 21 --out runs/flag-posterior
 	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior --device cpu --seed 0 \
-		--density maf --patience 20 \
+		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
 		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior --device cpu \
 		--out runs/flag-posterior-calibration
