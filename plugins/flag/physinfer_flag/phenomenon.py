@@ -4,7 +4,7 @@ The default target is simulated and rendered deterministically from a ground tru
 from the centre of the space. The flag refines with the SDN and the weights shipped in
 ``physinfer_flag/data/sdn_default.safetensors`` (``make pretrained`` reproduces them);
 ``--embedder spectral`` is the parameter-free fallback. Its posterior estimator
-(``physinfer_flag/data/posterior_default.safetensors``, 2.4-s clips embedded by that SDN;
+(``physinfer_flag/data/posterior_default.safetensors``, 2.4-s clips, ``spectral`` embedder;
 ``make posterior`` reproduces it) gives ``infer`` and ``refine`` their intervals.
 """
 
