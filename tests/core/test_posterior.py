@@ -185,6 +185,28 @@ def test_an_ensemble_is_a_mixture_of_its_seeded_flows_and_round_trips(tmp_path):
     )
 
 
+def test_training_and_sampling_leave_the_callers_random_streams_alone(toy_estimator):
+    """A notebook's torch and numpy streams go on as if physinfer had not drawn (sbi seeds both)."""
+    import torch
+
+    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.training import train_estimator
+
+    def draws() -> tuple:
+        return torch.rand(3).tolist(), np.random.rand(3).tolist()  # noqa: NPY002
+
+    torch.manual_seed(123)
+    np.random.seed(123)  # noqa: NPY002
+    expected = draws()
+    torch.manual_seed(123)
+    np.random.seed(123)  # noqa: NPY002
+    toy_estimator.sample_unit(np.array([0.5, -0.5, 0.0], dtype=np.float32), 50, seed=7)
+    pairs, identity = _toy_pairs_and_identity()
+    network = NetworkConfig(density="maf", hidden_features=8, num_transforms=1, max_epochs=1)
+    train_estimator(pairs, identity, network=network, seed=5, device="cpu")
+    assert draws() == expected
+
+
 def test_an_estimator_round_trips_through_its_file_and_samples_alike(toy_estimator, tmp_path):
     from physinfer.posterior.estimator import PosteriorEstimator
 

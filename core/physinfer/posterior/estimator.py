@@ -237,8 +237,8 @@ class PosteriorEstimator:
     def sample_unit_batched(self, xs: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
         """``(n, B, D)`` samples for ``B`` embeddings ``(B, E)`` at once (calibration)."""
         x = self._check_x(np.asarray(xs, dtype=np.float32))
-        torch.manual_seed(seed)
-        with torch.no_grad():
+        with torch.random.fork_rng(), torch.no_grad():  # the caller's torch RNG is left as it was
+            torch.manual_seed(seed)
             phi = self.network.sample((n,), condition=x)  # (n, B, D), unbounded
         return to_unit(phi.cpu().numpy().astype(np.float64))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -76,7 +76,8 @@ def train_estimator(
             if on_epoch is not None:
                 on_epoch(k * total + done, network.ensemble * total, best)
 
-        member, run = _train_one(theta, x, network, seed=seed + k, device=device, on_epoch=report)
+        with _private_rngs():
+            member, run = _train_one(theta, x, network, seed=seed + k, device=device, on_epoch=report)
         members.append(member)
         runs.append(run)
     training = {
@@ -145,6 +146,18 @@ def _train_one(
         "best_validation_loss": float(inference._summary["best_validation_loss"][-1]),
     }
     return estimator, run
+
+
+@contextlib.contextmanager
+def _private_rngs() -> Iterator[None]:
+    """Seed torch's and numpy's global generators for one flow (sbi draws from both), then
+    give the caller's state back: training in a notebook must not reset its random streams."""
+    state = np.random.get_state()  # noqa: NPY002 - the global state sbi uses
+    with torch.random.fork_rng():
+        try:
+            yield
+        finally:
+            np.random.set_state(state)  # noqa: NPY002
 
 
 def _quiet(train: Callable[..., Any], **kwargs: Any) -> Any:
