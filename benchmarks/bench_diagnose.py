@@ -284,6 +284,10 @@ def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]
     for hidden, seed in all_cases:
         pair = {}
         for workers in (1, after):
+            stored = case_dir_of(args.plugin, hidden, seed, args.out) / f"case-timing-w{workers}.json"
+            if args.timing_reuse and stored.is_file():  # a mode measured by an earlier invocation
+                pair[workers] = json.loads(stored.read_text())
+                continue
             case = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=f"timing-w{workers}")
             pair[workers] = case
             print(json.dumps({"hidden": hidden, "seed": seed, "workers": workers, "named": case["named"],
@@ -552,6 +556,9 @@ def main() -> None:
                         help="diagnose each case twice, in one process and with --workers; wall times and "
                              "whether the decisions agree (exit 1 if any differs)")
     parser.add_argument("--workers", type=int, default=None, help="with --timing: processes after (default: CPUs)")
+    parser.add_argument("--timing-reuse", action="store_true",
+                        help="with --timing: take a mode's row from an earlier invocation's case-timing-w<K>.json "
+                             "(delete it, and its timing-w<K>/ directory, to measure that mode again)")
     parser.add_argument("--out", default="/tmp/bench_diagnose")
     args = parser.parse_args()
 

@@ -460,3 +460,25 @@ def test_a_wide_video_is_framed_before_every_stage(tmp_path: Path):
     assert "skipped" not in prepared, prepared
     x, y, w, h = prepared["box"]
     assert 30 <= x + w / 2 <= 114, prepared  # around the pendulum, in the wide frame's pixels
+
+
+def _pendulum_under_another_name():
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    pendulum = registry.phenomenon("pendulum")
+    registry.scoped("test").add_phenomenon("pendulum_alias", lambda **_: pendulum, "the pendulum, renamed")
+    return registry
+
+
+def test_workers_find_the_effects_of_a_phenomenon_registered_under_another_name(tmp_path: Path):
+    """bench_diagnose's flag_lite is the flag under another name: its effects are the flag's."""
+    from physinfer.diagnose.parallel import usable_workers
+    from physinfer.diagnose.workflow import DiagnoseSettings
+
+    settings = DiagnoseSettings(plugin="pendulum_alias", out=tmp_path, workers=2,
+                                registry_factory=_pendulum_under_another_name)  # fmt: skip
+    assert usable_workers(settings, 3, ["quadratic_drag"]) == (2, None)
+    not_installed = DiagnoseSettings(plugin="pendulum_alias", out=tmp_path, workers=2)
+    workers, why = usable_workers(not_installed, 3, ["quadratic_drag"])
+    assert workers == 1 and "not installed" in why

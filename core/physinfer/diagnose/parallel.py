@@ -139,7 +139,9 @@ def run_job(job: StageJob) -> dict[str, float]:
             control_stage(base, job.target, job.baseline_best, gaps, effect_steps=job.effect_steps,
                           target_label=job.target_label, **common)  # fmt: skip
         else:
-            effect = registry.effect(str(job.key), phenomenon=job.settings.plugin)
+            # Effects are registered under the phenomenon's own name, which a phenomenon
+            # registered under another (bench_diagnose's flag_lite is "flag") does not share.
+            effect = registry.effect(str(job.key), phenomenon=base.phenomenon.name)
             stage = effect_stage(
                 str(job.key), effect, base, job.target, job.baseline_best, gaps, effect_steps=job.effect_steps,
                 target_label=job.target_label, **common,
@@ -200,9 +202,9 @@ def usable_workers(
         return 1, None
     try:
         installed = _installed(settings)
-        installed.phenomenon(settings.plugin)
+        phenomenon = installed.phenomenon(settings.plugin).name
         for name in effects:
-            installed.effect(name, phenomenon=settings.plugin)
+            installed.effect(name, phenomenon=phenomenon)
     except Exception:  # noqa: BLE001 - any failure means a worker could not rebuild the model
         return (
             1,
@@ -269,7 +271,7 @@ def run_on_workers(
     if why_not:
         say(f"      {why_not}")
     if workers < 2:
-        return {"workers": 1, "scheduler": None}
+        return {"workers": 1, "scheduler": None, **({"why_one_process": why_not} if why_not else {})}
     where = (
         f"the Dask cluster at {settings.scheduler}"
         if settings.scheduler
