@@ -79,6 +79,9 @@ def test_interpolation_between_and_below_rungs():
         0.25 * 2**0.5
     )
     assert interpolate_limit(fractions, [0.1, 0.2, 0.3, 0.4], 0.0, 1.0) is None
+    # A zero threshold (deterministic, no calibration) is cleared by any shift: limit 0.
+    assert interpolate_limit(fractions, [0.0, 2.0, 4.0, 8.0], 0.0, 0.0) == 0.0
+    assert interpolate_limit(fractions, [0.0, 0.0, 0.0, 0.0], 0.0, [0.0, 0.0, 0.0, 0.0]) is None
 
 
 def test_the_printed_line():

@@ -47,6 +47,7 @@ TIMING_KEYS = {
     "renders_per_minute",
     "worker_seconds",
     "selection_s",
+    "stages_s",
 }
 
 

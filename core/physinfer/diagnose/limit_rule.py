@@ -118,7 +118,9 @@ def interpolate_limit(
     for f, g, tau in zip(fractions, gaps, taus, strict=True):
         if not math.isfinite(g):
             continue
-        ratio = g / tau
+        # A zero threshold (a deterministic model without calibration: null scale 0) is
+        # cleared by any positive gap.
+        ratio = g / tau if tau > 0.0 else (math.inf if g > 0.0 else 0.0)
         if ratio > 1.0:
             if prev is None or prev[1] <= 0.0:
                 if tau <= floor_gap:
