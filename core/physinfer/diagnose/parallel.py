@@ -127,7 +127,6 @@ def run_job(job: StageJob) -> dict[str, float]:
     registry, base = _worker_pipeline(job.settings)
     common = {"registry": registry, "settings": job.settings}
     gaps = GapContext(job.target, job.target_embedding, job.seeds, job.settings.out)
-    seconds: dict[str, float] = {}
     start = time.perf_counter()
     with torch_threads(refinement_torch_threads()):
         if job.kind == "calibration":
@@ -147,9 +146,8 @@ def run_job(job: StageJob) -> dict[str, float]:
                 target_label=job.target_label, **common,
             )  # fmt: skip
             ablated_stage(stage, base, gaps)
-    # One figure for the job: its stages ran back to back, the first most of the time.
-    seconds[job.stages[0][0]] = time.perf_counter() - start
-    return seconds
+    # One figure for the job, under its first stage: a calibration run's control ran after it.
+    return {job.stages[0][0]: time.perf_counter() - start}
 
 
 def _worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
@@ -250,23 +248,13 @@ def prefetch_stages(
 
 def run_on_workers(
     settings: DiagnoseSettings,
+    jobs: Sequence[StageJob],
     effects: Sequence[str],
-    baseline_best: Mapping[str, float],
-    target: Target,
-    target_embedding: np.ndarray,
-    seeds: Sequence[int],
-    steps: int,
-    effect_steps: int,
-    target_label: str,
     bars: StageProgress,
     clock: StageClock,
     say: Log,
 ) -> dict[str, Any]:
-    """Run the stages after the baseline on workers when more than one is usable; how they ran."""
-    jobs = stage_jobs(
-        settings, effects, baseline_best=baseline_best, target=target, target_embedding=target_embedding,
-        seeds=seeds, steps=steps, effect_steps=effect_steps, target_label=target_label,
-    )  # fmt: skip
+    """Run ``jobs`` (:func:`stage_jobs`) on workers when more than one is usable; how they ran."""
     workers, why_not = usable_workers(settings, len(jobs), effects)
     if why_not:
         say(f"      {why_not}")

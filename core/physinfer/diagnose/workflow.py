@@ -45,10 +45,9 @@ from physinfer.diagnose.limit_stage import diagnosis_simulations, run_limits
 from physinfer.diagnose.limits import LimitConfig
 from physinfer.diagnose.localise import LocaliseConfig
 from physinfer.diagnose.outputs import write_outputs
-from physinfer.diagnose.parallel import run_on_workers, scene_registry
+from physinfer.diagnose.parallel import run_on_workers, scene_registry, stage_jobs
 from physinfer.diagnose.progress import StageClock, StageProgress
 from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
-    CALIBRATION_SEED_STRIDE,
     GapContext,
     Stage,
     ablated_stage,
@@ -56,7 +55,6 @@ from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and St
     build_base,
     calibration_run,
     calibration_seeds,
-    clip_of,
     control_stage,
     effect_stage,
     run_stage,
@@ -309,10 +307,12 @@ def _diagnose_stages(
     # The stages below start from the baseline's fit and not from each other: side by side
     # on workers first, if there are any; the pass below then reads them from disk.
     adopt_single_calibration(settings.out)
-    workers = run_on_workers(
-        settings, list(effect_objs), baseline.best_params, target, target_embedding, seeds, steps, effect_steps,
-        target_label, bars, clock, say,
+    jobs = stage_jobs(
+        settings, list(effect_objs), baseline_best=baseline.best_params, target=target,
+        target_embedding=target_embedding, seeds=seeds, steps=steps, effect_steps=effect_steps,
+        target_label=target_label,
     )  # fmt: skip
+    workers = run_on_workers(settings, jobs, list(effect_objs), bars, clock, say)
 
     # 2. The self-consistency runs (the null scale's optimizer part).
     calibration: list[dict[str, Any]] = []
