@@ -98,7 +98,7 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     """Simulate, render and write one target; returns its true parameters.
 
     ``strength``: the hidden effect's parameters that far along their path from off to the
-    far end of their range (:func:`physinfer.diagnose.limits.strength_path`; the power
+    far end of their range (:func:`physinfer.discrepancy.limits.strength_path`; the power
     curves) instead of a random realistic strength.
     """
     from physinfer.session import build_pipeline
@@ -107,7 +107,7 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
     truth, rng = base_truth(pipeline.phenomenon.parameter_space, seed)
     if hidden and strength is not None:
-        from physinfer.diagnose.limits import strength_path, values_at
+        from physinfer.discrepancy.limits import strength_path, values_at
 
         effect_space = pipeline.effects[0].parameter_space
         truth.update(values_at(effect_space, *strength_path(effect_space), strength))
@@ -143,9 +143,9 @@ def ladder_case(registry: Any, plugin: str, seed: int, args: argparse.Namespace)
     re-simulations): what a diagnosis' self-consistency runs would measure, read off the
     stored tables. Cheap enough for the flag, whose full diagnosis costs tens of minutes.
     """
-    from physinfer.diagnose.candidates import augmented_pipeline
-    from physinfer.diagnose.decide import DecisionRule
-    from physinfer.diagnose.limits import LimitConfig, LimitInputs, detection_limits
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.discrepancy.decide import DecisionRule
+    from physinfer.discrepancy.limits import LimitConfig, LimitInputs, detection_limits
     from physinfer.noise import measure_noise_floor, noise_seeds
     from physinfer.session import build_pipeline
 
@@ -192,7 +192,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     the stored tables were made; the decisions do not depend on it)."""
     import functools
 
-    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.io import atomic_write_json
 
     registry = load_bench_registry(args.frames)
@@ -320,7 +320,7 @@ def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, di
     largest of the runs with their controls, misspecified by the gap test or by a
     significant effect (``R3max+control+effect``).
     """
-    from physinfer.diagnose.decide import (
+    from physinfer.discrepancy.decide import (
         DecisionRule,
         effect_significance,
         final_verdict,
@@ -469,7 +469,7 @@ def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from physinfer.diagnose.limits import strength_path, values_at
+    from physinfer.discrepancy.limits import strength_path, values_at
 
     fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 3.4), squeeze=False)
     for ax, summ in zip(axes[0], summaries, strict=True):

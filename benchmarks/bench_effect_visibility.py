@@ -19,7 +19,7 @@ also share_on_closer, share_energy_on_lower and per_target).
 
 ``--features`` asks whether anything could see the effect: ``embedder`` (default) uses the
 embedder; ``localisation`` the diagnosis's own localisation statistics (log band power and
-log motion envelope per region, amplitude non-stationarity; :mod:`physinfer.diagnose.localise`);
+log motion envelope per region, amplitude non-stationarity; :mod:`physinfer.discrepancy.localise`);
 ``trajectory`` skips rendering and compares the vertices themselves (per-vertex mean
 position and standard deviation over the clip) — if that cannot tell "off" from "on", no
 video feature can. ``mean_image`` is the clip's time-averaged
@@ -65,7 +65,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import bench_diagnose  # noqa: E402  (the flag_lite phenomenon and the realistic strengths)
 
-from physinfer.diagnose.decide import rank_test_less  # noqa: E402
+from physinfer.discrepancy.decide import rank_test_less  # noqa: E402
 
 #: Each effect switched off (its parameters' off values; the gusts' time scale is moot then).
 OFF: dict[str, dict[str, float]] = {
@@ -124,7 +124,7 @@ def slow_image_features(clip: Any) -> np.ndarray:
 def localisation_features(clip: Any) -> np.ndarray:
     """The localisation statistics of a clip as one vector (log band power and log motion
     envelope per region, amplitude non-stationarity per region)."""
-    from physinfer.diagnose.localise import LocaliseConfig, spectral_maps
+    from physinfer.discrepancy.localise import LocaliseConfig, spectral_maps
 
     maps = spectral_maps(clip, fps=clip.fps, n_frames=len(clip.frames), config=LocaliseConfig())
     return np.concatenate([

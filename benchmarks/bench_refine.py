@@ -57,8 +57,8 @@ import numpy as np
 
 from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
+from physinfer.loop import RefineConfig, run_refinement
 from physinfer.plugins import load_registry
-from physinfer.refine import RefineConfig, run_refinement
 from physinfer.roles import Target
 from physinfer.rundir import RunDirectory
 from physinfer.session import build_pipeline
@@ -106,7 +106,7 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     amortized = None
     start = time.perf_counter()
     if args.posterior:  # as `refine` does: start at the posterior median, search its box
-        from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.discrepancy.warmstart import warm_start_factory
         from physinfer.posterior.refined import posterior_start
         from physinfer.posterior.workflow import posterior_for_refinement
 

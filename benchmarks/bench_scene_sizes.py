@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from physinfer.loop import squared_distance
 from physinfer.plugins import load_registry
-from physinfer.refine import squared_distance
 from physinfer.roles import Target
 from physinfer.session import build_pipeline, refine
 

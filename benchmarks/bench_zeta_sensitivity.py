@@ -26,8 +26,8 @@ import time
 
 import numpy as np
 
+from physinfer.loop import squared_distance
 from physinfer.plugins import load_registry
-from physinfer.refine import squared_distance
 from physinfer.session import build_pipeline
 
 #: ``{label: (low ζ overrides, high ζ overrides)}`` over the dataset's ranges.

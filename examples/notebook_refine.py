@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-import physinfer.api as pi
+import physinfer as pi
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out", type=Path, default=Path("runs/notebook"))

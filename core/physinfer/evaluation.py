@@ -1,6 +1,6 @@
 """Trial evaluation: simulate θ, render it with ζ, embed the clip, measure the distance.
 
-The loop (:mod:`physinfer.refine`), the noise floor (:mod:`physinfer.noise`), the trial
+The loop (:mod:`physinfer.loop`), the noise floor (:mod:`physinfer.noise`), the trial
 workers (:mod:`physinfer.trial_workers`) and the diagnosis all evaluate trials through these
 functions; they sit below all of them. A simulation that raises, returns NaN or blows up is a
 failed trial (an error string), never an exception: it is a property of θ, not a bug.

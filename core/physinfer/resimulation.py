@@ -1,6 +1,6 @@
 """A refinement's re-simulations: the observation noise told to the optimizer (the centre
 under extra seeds), the selection of the best fit among the finalists (each under fresh
-seeds), and the noise floor at the best fit. Used by :mod:`physinfer.refine`'s loop, which
+seeds), and the noise floor at the best fit. Used by :mod:`physinfer.loop`'s loop, which
 re-exports them.
 """
 
@@ -20,7 +20,7 @@ from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
 
 if TYPE_CHECKING:
-    from physinfer.refine import RefineConfig, RefineResult
+    from physinfer.loop import RefineConfig, RefineResult
 
 
 #: Salt of the selection's seeds, so they repeat neither the trials' nor the noise floor's.

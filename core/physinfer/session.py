@@ -15,6 +15,7 @@ from typing import Any
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.locking import exclusive_directory
+from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's historical API
     EffectParameterError,
     build_pipeline,
@@ -24,7 +25,6 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     make_simulator,
     naming_effects,
 )
-from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord
@@ -145,7 +145,7 @@ def refine(
     run_dir.check_out(overwrite=overwrite, target=target_path)
     model_file = None
     if model is not None:
-        from physinfer.diagnose.model import model_for_refine
+        from physinfer.discrepancy.model import model_for_refine
 
         model_file = model_for_refine(model, plugin, effects)
         effects = model_file.effects
@@ -211,14 +211,14 @@ def refine(
     factory = registry.get("optimizers", optimizer).load()
     start_x, post_start = None, None
     if model_file is not None:
-        from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.discrepancy.warmstart import warm_start_factory
 
         space = pipeline.simulator.parameter_space
         start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
         start_x = space.to_unit({name: start[name] for name in space.names})
         factory = warm_start_factory(factory, start_x)
     elif amortized is not None:  # spend the budget where the video points
-        from physinfer.diagnose.warmstart import warm_start_factory
+        from physinfer.discrepancy.warmstart import warm_start_factory
         from physinfer.posterior.refined import posterior_start
 
         post_start = posterior_start(amortized, pipeline.simulator.parameter_space)

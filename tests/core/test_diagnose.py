@@ -1,4 +1,4 @@
-"""Tests of physinfer.diagnose: localisation, decisions, warm starts, model files, and the
+"""Tests of physinfer.discrepancy: localisation, decisions, warm starts, model files, and the
 workflow end to end on the pendulum example (hidden drag; no effect)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from physinfer.diagnose.candidates import off_values, warm_start
-from physinfer.diagnose.decide import (
+from physinfer.discrepancy.candidates import off_values, warm_start
+from physinfer.discrepancy.decide import (
     DecisionRule,
     effect_significance,
     final_verdict,
@@ -20,9 +20,9 @@ from physinfer.diagnose.decide import (
     rank_test_less,
     self_consistency_gap,
 )
-from physinfer.diagnose.localise import LocaliseConfig, localise
-from physinfer.diagnose.model import model_for_refine, read_model, write_model
-from physinfer.diagnose.warmstart import WarmStartOptimizer, warm_start_factory
+from physinfer.discrepancy.localise import LocaliseConfig, localise
+from physinfer.discrepancy.model import model_for_refine, read_model, write_model
+from physinfer.discrepancy.warmstart import WarmStartOptimizer, warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.optimizers.cma import CMAOptimizer
 from physinfer.optimizers.random import RandomOptimizer
@@ -97,7 +97,7 @@ def test_self_consistency_gap_summaries():
 
 
 def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
-    from physinfer.diagnose.workflow import calibration_seeds
+    from physinfer.discrepancy.workflow import calibration_seeds
     from physinfer.noise import noise_seeds
 
     for seed in (0, 3, 41):
@@ -111,7 +111,7 @@ def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
 
 
 def test_calibration_runs_must_be_positive(tmp_path: Path):
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
     with pytest.raises(UserInputError, match="--calibration-runs must be at least 1"):
         DiagnoseSettings(plugin="pendulum", out=tmp_path, calibration_runs=0).validate()
@@ -293,7 +293,7 @@ def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
 
 
 def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
-    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()
@@ -356,7 +356,7 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert len({run["target_seed"] for run in report["calibration"]}) == 3
     assert report["tested_gap"] == report["gap_before"]
     assert report["settings"]["calibration_runs"] == 3 and report["settings"]["calibration_control"]
-    # The detection limit of every candidate (physinfer.diagnose.limits), cached for the re-run.
+    # The detection limit of every candidate (physinfer.discrepancy.limits), cached for the re-run.
     assert set(cand) >= {"detectable_from", "limit"}
     assert cand["detectable_from"] is None or set(cand["detectable_from"]) == {"drag_quadratic"}
     assert (cand["detectable_from"] is None) == (cand["limit"]["reason"] is not None)
@@ -473,8 +473,8 @@ def _pendulum_under_another_name():
 
 def test_workers_find_the_effects_of_a_phenomenon_registered_under_another_name(tmp_path: Path):
     """bench_diagnose's flag_lite is the flag under another name: its effects are the flag's."""
-    from physinfer.diagnose.parallel import usable_workers
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.parallel import usable_workers
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_alias", out=tmp_path, workers=2,
                                 registry_factory=_pendulum_under_another_name)  # fmt: skip

@@ -1,4 +1,4 @@
-"""Tests of physinfer.diagnose.limits: the detection limit of an effect on this target's setting.
+"""Tests of physinfer.discrepancy.limits: the detection limit of an effect on this target's setting.
 
 Real simulations of the pendulum example (its renderer and the grid-spectrum embedder); a
 jittery pendulum (the bob shaken by seeded noise, as a shaky video is) stands in for a
@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from physinfer.diagnose.decide import DecisionRule
-from physinfer.diagnose.limits import (
+from physinfer.discrepancy.decide import DecisionRule
+from physinfer.discrepancy.limits import (
     LimitConfig,
     LimitInputs,
     Probe,
@@ -188,7 +188,7 @@ def _limits(
     make_longer=None,
 ):
     """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor."""
-    from physinfer.refine import Pipeline
+    from physinfer.loop import Pipeline
 
     phenomenon, renderer = pendulum
     base = Pipeline(phenomenon, base_sim, renderer, embedder, [])

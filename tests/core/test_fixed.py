@@ -119,7 +119,7 @@ def test_a_self_fixing_phenomenon_s_model_file_and_truth_use_its_own_space(tmp_p
     """``refine --model`` on a model file of a phenomenon that holds parameters itself, and
     ``--truth``: its held parameters are not model parameters (they were looked through as
     if ``--fix`` had held them, so the file reported a mismatch and ``--truth`` took them)."""
-    from physinfer.diagnose.model import write_model
+    from physinfer.discrepancy.model import write_model
 
     registry, held = _registry_with_a_self_fixing_pendulum()
     space = held.parameter_space

@@ -104,4 +104,4 @@ def test_no_import_circles():
 
 def test_the_checks_can_fail():
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
-    assert "physinfer.refine" in imported(MODULES["physinfer.session"])
+    assert "physinfer.loop" in imported(MODULES["physinfer.session"])

@@ -26,6 +26,25 @@ def test_simulate_returns_a_rendered_simulation_with_the_cli_json(tmp_path, phys
     assert isinstance(fig, Figure) and len(fig.axes) == 4
 
 
+def test_the_commands_are_the_packages_own_names_imported_on_first_use():
+    import subprocess
+    import sys
+
+    import physinfer
+
+    for name in physinfer.API_NAMES:
+        assert getattr(physinfer, name) is getattr(pi, name), name
+        assert name in dir(physinfer)
+    with pytest.raises(AttributeError, match="no attribute 'refin'"):
+        _ = physinfer.refin
+    code = (
+        "import sys, physinfer; loaded = 'physinfer.api' in sys.modules; f = physinfer.infer; "
+        "heavy = [m for m in ('torch', 'pyrender', 'ax', 'sbi') if m in sys.modules]; print(loaded, heavy)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "[]"], out.stdout + out.stderr
+
+
 def test_a_misspelt_setting_names_the_closest_one():
     with pytest.raises(UserInputError, match="no setting 'batchsize'.*'batch_size'"):
         pi.refine("pendulum", batchsize=4)
@@ -82,6 +101,8 @@ def _cli_parameters(*path: str) -> set[str]:
         (("refine",), pi.RefineOptions),
         (("infer",), pi.InferOptions),
         (("diagnose",), pi.DiagnoseOptions),
+        (("posterior", "train"), pi.PosteriorTrainOptions),
+        (("evaluate", "calibration"), pi.CalibrationOptions),
     ],
 )
 def test_every_cli_option_is_a_field_of_the_commands_options_and_back(command, options):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
+from physinfer.loop import SELECTION_FILE, Pipeline, RefineConfig, run_refinement, select_best
 from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
-from physinfer.refine import SELECTION_FILE, Pipeline, RefineConfig, run_refinement, select_best
 from physinfer.roles import Embedder, Renderer, Simulator, Target
 from physinfer.rundir import RunDirectory, TrialRecord
 from physinfer.types import Clip, Trajectory

@@ -379,6 +379,37 @@ def test_evaluate_calibration_reports_coverage_per_parameter(
     assert (out / "calibration.png").stat().st_size > 1000 and (out / "calibration.json").is_file()
 
 
+def test_the_api_trains_and_calibrates_with_progress_and_figures(
+    pendulum_set, pendulum_estimator, tmp_path
+):
+    from matplotlib.figure import Figure
+
+    import physinfer.api as pi
+
+    seen: list[tuple[str, int, int]] = []
+    trained = pi.train_posterior(
+        "pendulum", data=pendulum_set, out=tmp_path / "api.safetensors", embedder_frames=50,
+        max_epochs=10, device="cpu", progress=lambda *args: seen.append(args),
+    )  # fmt: skip
+    assert trained.path.is_file() and trained.to_dict()["parameters"] == ["length", "damping", "amplitude"]
+    assert {stage for stage, _, _ in seen} == {"embedding", "training"}
+    curve = trained.estimator.validation_curves[0]
+    assert len(curve) == trained.to_dict()["training"]["epochs"]
+    assert isinstance(trained.plot(), Figure)
+
+    path, _ = pendulum_estimator
+    seen.clear()
+    cal = pi.evaluate_calibration(
+        "pendulum", pi.CalibrationOptions(data=pendulum_set, posterior=path, samples=100),
+        out=tmp_path / "cal", progress=lambda *args: seen.append(args),
+    )  # fmt: skip
+    assert cal.to_dict()["n_pairs"] == 20 and (tmp_path / "cal" / "calibration.json").is_file()
+    assert {stage for stage, _, _ in seen} == {"embedding", "sampling"}
+    assert len(cal.plot().axes) == 4  # three rank histograms and the coverage panel
+    with pytest.raises(UserInputError, match="data: give"):
+        pi.evaluate_calibration("pendulum", posterior=path)
+
+
 def test_bad_input_to_the_posterior_commands_is_one_clear_error(
     pendulum_set, pendulum_estimator, tmp_path, physinfer_cli
 ):
@@ -511,7 +542,7 @@ def test_no_refined_posterior_without_a_noise_scale_or_enough_trials():
 
 def test_refine_prints_digits_only_for_what_the_video_determines():
     from physinfer.cli.app import refine_result_lines
-    from physinfer.refine import RefineResult
+    from physinfer.loop import RefineResult
 
     def marginal(label: str) -> dict:
         return {
@@ -547,7 +578,7 @@ def test_refine_from_a_model_file_with_a_posterior_reports_it_without_a_search_b
 ):
     """``--model`` (a diagnosis with no effect named) warm-starts the search; the posterior is
     still reported, with no search box of its own."""
-    from physinfer.diagnose.model import write_model
+    from physinfer.discrepancy.model import write_model
     from physinfer.plugins import load_registry
 
     path, _ = pendulum_estimator

@@ -269,7 +269,7 @@ def test_open_hands_the_page_to_the_browser(refine_run, tmp_path):
 
 @pytest.mark.slow
 def test_a_diagnosis_gets_a_page_with_its_verdict_maps_and_video(tmp_path):
-    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()

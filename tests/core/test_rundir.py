@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
 from physinfer.errors import UserInputError
 from physinfer.locking import LOCK_FILE, DirectoryLock
 from physinfer.plugins import load_registry

@@ -2,14 +2,15 @@
 
 ::
 
-    import physinfer.api as pi
+    import physinfer
 
-    sim = pi.simulate("pendulum", set={"length": 1.2})
-    result = pi.refine("pendulum", steps=20, out="runs/pendulum")
+    sim = physinfer.simulate("pendulum", set={"length": 1.2})
+    result = physinfer.refine("pendulum", steps=20, out="runs/pendulum")
     result.best_params, result.posterior, result.to_dict(), result.plot()
 
-(The functions live here rather than at the top level because ``physinfer.refine`` and
-``physinfer.diagnose`` are the modules of the loop and of the diagnosis.)
+(The package re-exports the commands and their options: ``physinfer.refine`` is
+``physinfer.api.refine``. The loop itself is :mod:`physinfer.loop`, the diagnosis
+:mod:`physinfer.discrepancy`.)
 
 The keyword arguments are the CLI's options (``--batch-size`` is ``batch_size``,
 ``--render-set NAME=VALUE`` is ``render_set={NAME: VALUE}``); each command's settings are one
@@ -20,17 +21,20 @@ replacing its fields. The CLI is a thin shell over these functions. Nothing is p
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from physinfer.api.options import (
+    CalibrationOptions,
     DiagnoseOptions,
     FootageOptions,
     InferOptions,
     ModelOptions,
+    PosteriorTrainOptions,
     RefineOptions,
     SearchOptions,
     SimulateOptions,
@@ -43,21 +47,25 @@ from physinfer.api.results import Diagnosis, Simulation
 from physinfer.errors import UserInputError
 
 __all__ = [
+    "CalibrationOptions",
     "DiagnoseOptions",
     "Diagnosis",
     "FootageOptions",
     "InferOptions",
     "ModelOptions",
+    "PosteriorTrainOptions",
     "RefineOptions",
     "SearchOptions",
     "SimulateOptions",
     "Simulation",
     "TargetOptions",
     "diagnose",
+    "evaluate_calibration",
     "infer",
     "refine",
     "registry",
     "simulate",
+    "train_posterior",
 ]
 
 #: ``progress``: ``True`` for rich bars on stderr, or ``(done, total, best_distance) -> None``.
@@ -162,7 +170,7 @@ def refine(
             ``fix``, ``render_set``, ``out``, ``resume``, ...).
 
     Returns:
-        The :class:`~physinfer.refine.RefineResult`: ``best_params``, ``posterior`` (the
+        The :class:`~physinfer.loop.RefineResult`: ``best_params``, ``posterior`` (the
         90 % intervals and identifiability labels, when an estimator applies), the files
         written to ``run_dir``, ``to_dict()`` and ``plot()``.
     """
@@ -226,9 +234,9 @@ def diagnose(
         progress: Draw a progress bar per stage on stderr.
         **settings: Fields of :class:`DiagnoseOptions`.
     """
-    from physinfer.diagnose.decide import DecisionRule
-    from physinfer.diagnose.limits import LimitConfig
-    from physinfer.diagnose.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.decide import DecisionRule
+    from physinfer.discrepancy.limits import LimitConfig
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
 
     o = with_settings(DiagnoseOptions, options, settings)
     out = _optional(o.out) or _default_out(f"diagnose-{plugin}")
@@ -304,3 +312,99 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
         scene_set=o.scene_set,
         conditioning=o.conditioning(),
     )
+
+
+#: ``progress`` of a staged job: ``True`` for rich bars on stderr, or ``(stage, done, total) -> None``.
+StagedProgress = bool | Callable[[str, int, int], None]
+
+
+@contextlib.contextmanager
+def _staged_progress(progress: StagedProgress) -> Iterator[Callable[[str, int, int], None]]:
+    """The ``(stage, done, total)`` callback ``progress`` asks for."""
+    if callable(progress):
+        yield progress
+        return
+    from physinfer.progress import StageProgress
+
+    with StageProgress(bool(progress)) as bars:
+        yield bars.update
+
+
+def _required(value: Path | str | None, option: str, what: str) -> Path:
+    if value is None:
+        raise UserInputError(f"{option}: give {what}")
+    return Path(value)
+
+
+def train_posterior(
+    plugin: str,
+    options: PosteriorTrainOptions | None = None,
+    *,
+    progress: StagedProgress = False,
+    **settings: Any,
+) -> Any:
+    """Train an amortized posterior q(θ | s(x)) on a dataset (``physinfer posterior train``).
+
+    The dataset's clips are embedded once (cached beside it) and sbi's NPE is trained on the
+    (θ, embedding) pairs; the estimator file loads without unpickling code.
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        progress: ``True`` for rich bars on stderr (embedding, training), or a callable
+            ``(stage, done, total)``.
+        **settings: Fields of :class:`PosteriorTrainOptions` (``data`` and ``out`` are needed).
+
+    Returns:
+        The :class:`~physinfer.posterior.train_workflow.TrainResult`: ``estimator``, ``path``,
+        ``to_dict()`` and ``plot()`` (the validation loss per epoch).
+    """
+    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.train_workflow import train_posterior as run
+
+    o = with_settings(PosteriorTrainOptions, options, settings)
+    data = _required(o.data, "data", "the dataset directory (physinfer dataset generate)")
+    out = _required(o.out, "out", "the estimator file to write (*.safetensors)")
+    network = NetworkConfig(
+        density=o.density, max_epochs=o.max_epochs, stop_after_epochs=o.patience, ensemble=o.ensemble
+    )
+    with _staged_progress(progress) as report:
+        return run(
+            registry(), plugin=plugin, data=data, out=out, embedder=o.embedder,
+            embedder_frames=o.embedder_frames, weights=_optional(o.weights), device=o.device,
+            split=o.split, network=network, seed=o.seed, progress=report,
+        )  # fmt: skip
+
+
+def evaluate_calibration(
+    plugin: str,
+    options: CalibrationOptions | None = None,
+    *,
+    progress: StagedProgress = False,
+    **settings: Any,
+) -> Any:
+    """Simulation-based calibration of a posterior estimator on held-out simulations
+    (``physinfer evaluate calibration``): rank histograms and the coverage of its 50 % and
+    90 % intervals, per parameter.
+
+    Args:
+        plugin: The phenomenon.
+        options: All settings at once; ``settings`` replace its fields.
+        progress: ``True`` for rich bars on stderr (embedding, sampling), or a callable
+            ``(stage, done, total)``.
+        **settings: Fields of :class:`CalibrationOptions` (``data`` is needed).
+
+    Returns:
+        The :class:`~physinfer.posterior.calibrate_workflow.CalibrationReport`: coverage,
+        ranks, median errors and contraction per parameter, ``to_dict()`` and ``plot()``.
+    """
+    from physinfer.posterior.calibrate_workflow import evaluate_calibration as run
+
+    o = with_settings(CalibrationOptions, options, settings)
+    data = _required(o.data, "data", "a dataset of held-out simulations (physinfer dataset generate)")
+    with _staged_progress(progress) as report:
+        return run(
+            registry(), plugin=plugin, data=data, out=_optional(o.out) or _default_out(f"calibration-{plugin}"),
+            posterior=_optional(o.posterior), split=o.split, n_samples=o.samples, seed=o.seed,
+            device=o.device, progress=report,
+        )  # fmt: skip

@@ -226,7 +226,73 @@ class InferOptions(TargetOptions, FootageOptions):
     scene_set: Mapping[str, Any] = field(default_factory=dict)
 
 
-Options = TypeVar("Options", SimulateOptions, RefineOptions, DiagnoseOptions, InferOptions)
+@dataclass(frozen=True)
+class PosteriorTrainOptions:
+    """``physinfer posterior train``.
+
+    Attributes:
+        data: Dataset directory from ``physinfer dataset generate`` (θ stored with the clips).
+        out: Estimator file to write (``*.safetensors``; a JSON config is written beside it).
+        embedder: Embedder (``None``: the phenomenon's default).
+        embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
+        weights: Embedder weights file (``None``: the shipped default).
+        split: Dataset split to train on.
+        density: Density estimator: ``nsf`` (neural spline flow), ``maf`` or ``mdn``.
+        max_epochs: Upper bound on training epochs.
+        patience: Stop after this many epochs without a better validation loss.
+        seed: Seed of the networks' initialisation and batches.
+        ensemble: Flows trained with seeds ``seed .. seed + ensemble - 1``; the posterior is
+            their mixture.
+        device: torch device (``None``: CUDA when present, else CPU).
+    """
+
+    data: Path | None = None
+    out: Path | None = None
+    embedder: str | None = None
+    embedder_frames: int | None = None
+    weights: Path | None = None
+    split: str = "train"
+    density: str = "nsf"
+    max_epochs: int = 400
+    patience: int = 60
+    seed: int = 0
+    ensemble: int = 1
+    device: str | None = None
+
+
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """``physinfer evaluate calibration``.
+
+    Attributes:
+        data: Dataset of held-out simulations.
+        posterior: Estimator file (``None``: the phenomenon's shipped one).
+        split: Dataset split to check on.
+        samples: Posterior samples per simulation (at least 50).
+        seed: Seed of the posterior samples.
+        out: Directory for calibration.json and calibration.png (``None``:
+            ``runs/calibration-<plugin>-<time>``).
+        device: torch device.
+    """
+
+    data: Path | None = None
+    posterior: Path | None = None
+    split: str = "test"
+    samples: int = 1000
+    seed: int = 0
+    out: Path | None = None
+    device: str | None = None
+
+
+Options = TypeVar(
+    "Options",
+    SimulateOptions,
+    RefineOptions,
+    DiagnoseOptions,
+    InferOptions,
+    PosteriorTrainOptions,
+    CalibrationOptions,
+)
 
 
 def with_settings(

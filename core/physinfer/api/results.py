@@ -1,6 +1,6 @@
 """Result objects of the API that have no home in the layers below it.
 
-:class:`~physinfer.refine.RefineResult` (``refine``) and
+:class:`~physinfer.loop.RefineResult` (``refine``) and
 :class:`~physinfer.posterior.workflow.PosteriorReport` (``infer``) are the loop's own
 results; a simulation and a diagnosis get theirs here. Each has ``to_dict()`` (the JSON
 the CLI prints) and ``plot()`` (a matplotlib figure).
@@ -129,7 +129,7 @@ class Diagnosis:
     def plot(self) -> Any:
         """Each model's distances to the target and its gap against the noise floor, the null
         scale and the threshold (a matplotlib figure; ``gaps.png`` is the same drawing)."""
-        from physinfer.diagnose.figures import gaps_figure
+        from physinfer.discrepancy.figures import gaps_figure
 
         best = self.report["best_baseline"]
         models = [{"label": "baseline (best)", "gap": best["gap"], "distances": best["to_target"]}]

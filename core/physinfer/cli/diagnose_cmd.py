@@ -1,7 +1,7 @@
 """``physinfer diagnose``: name the effect a refined model is missing, or say none is.
 
 Registered as a command by physinfer's built-in plugin; a thin shell over :func:`physinfer.api.diagnose`, which runs
-:func:`physinfer.diagnose.workflow.run_diagnosis`.
+:func:`physinfer.discrepancy.workflow.run_diagnosis`.
 """
 
 from __future__ import annotations
@@ -145,7 +145,7 @@ def diagnose_cmd(
     given = dict(locals())
     from physinfer import api
     from physinfer.cli.app import options_from_cli
-    from physinfer.diagnose.limits import limit_line
+    from physinfer.discrepancy.limits import limit_line
 
     options = options_from_cli(api.DiagnoseOptions, given)
     diagnosis = api.diagnose(

@@ -1,14 +1,11 @@
 """``physinfer posterior train``, ``physinfer infer`` and ``physinfer evaluate calibration``.
 
-Thin shells over :mod:`physinfer.posterior.workflow`: parse options, call, print (one JSON
+Thin shells over :mod:`physinfer.api`: parse options, call, print (one JSON
 object with ``--json``; progress on stderr).
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -23,7 +20,6 @@ from physinfer.cli.app import (
     emit_json,
     err_console,
     handle_errors,
-    registry_and_infos,
 )
 
 posterior_app = typer.Typer(
@@ -46,26 +42,6 @@ PosteriorOpt = Annotated[
 @posterior_app.callback()
 def posterior_group() -> None:
     """Amortized posteriors over θ (neural posterior estimation with sbi; docs/posterior.md)."""
-
-
-@contextmanager
-def _stage_progress(enabled: bool = True) -> Iterator[object]:
-    """A rich progress bar per stage on stderr; yields ``progress(stage, done, total)``."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    bar = Progress(
-        TextColumn("{task.description:>10}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err_console, disable=not enabled,
-    )  # fmt: skip
-    tasks: dict[str, object] = {}
-
-    def progress(stage: str, done: int, total: int) -> None:
-        if stage not in tasks:
-            tasks[stage] = bar.add_task(stage, total=total)
-        bar.update(tasks[stage], completed=done, total=total)
-
-    with bar:
-        yield progress
 
 
 @posterior_app.command("train")
@@ -114,19 +90,13 @@ def train_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Train q(θ | s(x)) on a dataset's (θ, embedding) pairs; embeddings are cached beside the dataset."""
-    from physinfer.posterior.estimator import NetworkConfig
-    from physinfer.posterior.workflow import train_posterior
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.options import options_from_cli
 
-    registry, _ = registry_and_infos()
-    with _stage_progress() as progress:
-        result = train_posterior(
-            registry, plugin=plugin, data=data, out=out, embedder=embedder, embedder_frames=embedder_frames,
-            weights=weights, device=device, split=split,
-            network=NetworkConfig(
-                density=density, max_epochs=max_epochs, stop_after_epochs=patience, ensemble=ensemble
-            ),
-            seed=seed, progress=progress,
-        )  # fmt: skip
+    result = api.train_posterior(
+        plugin, options_from_cli(api.PosteriorTrainOptions, given), progress=True
+    )
     if as_json:
         emit_json(result.to_dict())
         return
@@ -208,16 +178,13 @@ def calibration_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Simulation-based calibration: rank histograms and coverage of the 50 % and 90 % intervals."""
-    from physinfer.posterior.workflow import evaluate_calibration
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.options import options_from_cli
 
-    if out is None:
-        out = Path("runs") / f"calibration-{plugin}-{time.strftime('%Y%m%d-%H%M%S')}"
-    registry, _ = registry_and_infos()
-    with _stage_progress() as progress:
-        report = evaluate_calibration(
-            registry, plugin=plugin, data=data, out=out, posterior=posterior, split=split, n_samples=samples,
-            seed=seed, device=device, progress=progress,
-        )  # fmt: skip
+    report = api.evaluate_calibration(
+        plugin, options_from_cli(api.CalibrationOptions, given), progress=True
+    )
     summary = report.to_dict()
     if as_json:
         emit_json(summary)
@@ -234,4 +201,4 @@ def calibration_cmd(
             f"median error {row['median_abs_error']:.3g}, contraction {row['mean_contraction']:.2f}",
             highlight=False,
         )
-    err_console.print(f"results in {out}")
+    err_console.print(f"results in {Path(report.paths['report']).parent}")

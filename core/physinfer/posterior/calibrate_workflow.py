@@ -46,6 +46,18 @@ class CalibrationReport:
         d.update(files=self.paths, seconds=self.seconds)
         return d
 
+    def plot(self) -> Any:
+        """Rank histograms and coverage per parameter (a matplotlib figure;
+        ``calibration.png`` is the same drawing)."""
+        from physinfer.posterior.calibration import calibration_figure
+
+        return calibration_figure(self.calibration, title=self.title)
+
+    @property
+    def title(self) -> str:
+        """What was checked: the dataset and its split."""
+        return f"{self.data.name} ({self.split})"
+
 
 def evaluate_calibration(
     registry: Registry,
@@ -136,9 +148,7 @@ def evaluate_calibration(
     )
     out.mkdir(parents=True, exist_ok=True)
     report.paths["plot"] = str(
-        plot_calibration(
-            cal, out / "calibration.png", title=f"{plugin}: {Path(data).name} ({split})"
-        )
+        plot_calibration(cal, out / "calibration.png", title=f"{plugin}: {report.title}")
     )
     report.paths["report"] = str(out / "calibration.json")
     atomic_write_json(out / "calibration.json", report.to_dict())

@@ -136,19 +136,25 @@ def calibrate(
 
 
 def plot_calibration(cal: Calibration, path: str | Path, *, title: str = "") -> Path:
-    """Rank histograms (one panel per parameter, the uniform band shaded) and the
-    coverage of each level against its nominal value, as one PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """:func:`calibration_figure` as one PNG."""
     from physinfer.io import atomic_path
+
+    fig = calibration_figure(cal, title=title)
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    return path
+
+
+def calibration_figure(cal: Calibration, *, title: str = "") -> Any:
+    """Rank histograms (one panel per parameter, the uniform band shaded) and the coverage
+    of each level against its nominal value (a matplotlib figure, no pyplot state)."""
+    from matplotlib.figure import Figure
 
     d = len(cal.names)
     cols = min(d, 6)
     rows = (d + cols - 1) // cols + 1
-    fig = plt.figure(figsize=(2.6 * cols, 2.2 * rows), layout="constrained")
+    fig = Figure(figsize=(2.6 * cols, 2.2 * rows), layout="constrained")
     bins = 10
     expected = cal.n_pairs / bins
     band = 2.0 * np.sqrt(expected * (1 - 1 / bins))
@@ -170,8 +176,4 @@ def plot_calibration(cal: Calibration, path: str | Path, *, title: str = "") -> 
     ax.set_ylabel("coverage")
     ax.legend(fontsize=7, loc="lower right")
     fig.suptitle(title or f"simulation-based calibration on {cal.n_pairs} held-out simulations", fontsize=9)
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return path
+    return fig

@@ -224,6 +224,8 @@ class PosteriorEstimator:
         self.config = config
         self.network = network.to(device).eval()
         self.device = device
+        #: Validation loss per epoch of each flow, when trained in this process (not saved).
+        self.validation_curves: list[list[float]] = []
 
     @property
     def parameter_space(self) -> ParameterSpace:

@@ -45,6 +45,22 @@ class TrainResult:
             "seconds": self.seconds,
         }
 
+    def plot(self) -> Any:
+        """The validation loss per epoch of each flow trained (a matplotlib figure)."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(5, 3.2), layout="constrained")
+        ax = fig.subplots()
+        curves = self.estimator.validation_curves
+        for k, curve in enumerate(curves):
+            ax.plot(range(1, len(curve) + 1), curve, lw=1, label=f"flow {k}" if len(curves) > 1 else None)
+        ax.set_xlabel("epoch")
+        ax.set_ylabel("validation loss (−log q)")
+        ax.set_title(f"{self.estimator.config.plugin}: {self.path.name}", fontsize=9)
+        if len(curves) > 1:
+            ax.legend(fontsize=7)
+        return fig
+
 
 def train_posterior(
     registry: Registry,

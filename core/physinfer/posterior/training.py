@@ -97,7 +97,9 @@ def train_estimator(
         network=network,
     )
     config = replace(config, training={**config.training, **training})
-    return PosteriorEstimator(config, estimator.cpu(), "cpu")
+    trained = PosteriorEstimator(config, estimator.cpu(), "cpu")
+    trained.validation_curves = [r["validation_curve"] for r in runs]
+    return trained
 
 
 def _train_one(
@@ -144,6 +146,7 @@ def _train_one(
     run = {
         "epochs": int(inference.epoch),
         "best_validation_loss": float(inference._summary["best_validation_loss"][-1]),
+        "validation_curve": [float(v) for v in inference._summary["validation_loss"]],
     }
     return estimator, run
 

@@ -12,14 +12,14 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
     control/             the baseline refined ``effect_steps`` more trials from its best θ
     effect-<name>/       the baseline with <name> switched in, the same budget and warm start
     limits.json          each candidate's detection limit at the best baseline fit
-                         (:mod:`physinfer.diagnose.limits`; skipped with ``limits=False``)
+                         (:mod:`physinfer.discrepancy.limits`; skipped with ``limits=False``)
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
 
 Step 2's gap is each model's best θ re-simulated under the same ``K`` fresh seeds (see
-:mod:`physinfer.diagnose.gap`); the decisions are in :mod:`physinfer.diagnose.decide`.
+:mod:`physinfer.discrepancy.gap`); the decisions are in :mod:`physinfer.discrepancy.decide`.
 Re-running with the same ``--out`` continues where it stopped. The stages after the
 baseline do not depend on each other: with ``workers`` (default: one per CPU) they run side
-by side on worker processes or a Dask cluster first (:mod:`physinfer.diagnose.parallel`),
+by side on worker processes or a Dask cluster first (:mod:`physinfer.discrepancy.parallel`),
 and the pass through the stages below reads them back from disk.
 """
 
@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.conditioning import Conditioning
-from physinfer.diagnose.decide import (
+from physinfer.discrepancy.decide import (
     DecisionRule,
     effect_significance,
     final_verdict,
@@ -41,13 +41,13 @@ from physinfer.diagnose.decide import (
     null_scale,
     self_consistency_gap,
 )
-from physinfer.diagnose.limit_stage import diagnosis_simulations, run_limits
-from physinfer.diagnose.limits import LimitConfig
-from physinfer.diagnose.localise import LocaliseConfig
-from physinfer.diagnose.outputs import write_outputs
-from physinfer.diagnose.parallel import run_on_workers, scene_registry, stage_jobs
-from physinfer.diagnose.progress import StageClock, StageProgress
-from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
+from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
+from physinfer.discrepancy.limits import LimitConfig
+from physinfer.discrepancy.localise import LocaliseConfig
+from physinfer.discrepancy.outputs import write_outputs
+from physinfer.discrepancy.parallel import run_on_workers, scene_registry, stage_jobs
+from physinfer.discrepancy.progress import StageClock
+from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
     GapContext,
     Stage,
     ablated_stage,
@@ -62,9 +62,10 @@ from physinfer.diagnose.stages import (  # noqa: F401 - calibration_seeds and St
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir
 from physinfer.locking import LOCK_FILE, exclusive_directory
+from physinfer.loop import Pipeline, RefineConfig
 from physinfer.noise import noise_seeds
 from physinfer.parameters import refuse_repeats
-from physinfer.refine import Pipeline, RefineConfig
+from physinfer.progress import StageProgress
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RUN_FILE
@@ -100,14 +101,14 @@ class DiagnoseSettings:
         floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
         select_top: Every stage re-simulates its best ``M`` trials under ``select_seeds``
             fresh seeds and keeps the lowest mean (0: the lowest logged distance; see
-            :func:`physinfer.refine.select_best`). For chaotic phenomena it keeps the
+            :func:`physinfer.loop.select_best`). For chaotic phenomena it keeps the
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
         batch_size: Trials per optimizer step of every stage, simulated as one batch (see
-            :class:`physinfer.refine.RefineConfig`).
+            :class:`physinfer.loop.RefineConfig`).
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
-            (the maximum by default) makes their gaps one (see :mod:`physinfer.diagnose.decide`).
+            (the maximum by default) makes their gaps one (see :mod:`physinfer.discrepancy.decide`).
         calibration_control: Follow each calibration run with its own control
             (``effect_steps`` trials warm-started from its best θ), so that a self-consistency
             gap has the budget of the best baseline fit it is compared with; the

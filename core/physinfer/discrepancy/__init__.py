@@ -14,19 +14,19 @@ __all__ = ["DecisionRule", "DiagnoseSettings", "LocaliseConfig", "read_model", "
 
 def __getattr__(name: str) -> Any:
     if name in ("DiagnoseSettings", "run_diagnosis"):
-        from physinfer.diagnose import workflow
+        from physinfer.discrepancy import workflow
 
         return getattr(workflow, name)
     if name == "DecisionRule":
-        from physinfer.diagnose.decide import DecisionRule
+        from physinfer.discrepancy.decide import DecisionRule
 
         return DecisionRule
     if name == "LocaliseConfig":
-        from physinfer.diagnose.localise import LocaliseConfig
+        from physinfer.discrepancy.localise import LocaliseConfig
 
         return LocaliseConfig
     if name == "read_model":
-        from physinfer.diagnose.model import read_model
+        from physinfer.discrepancy.model import read_model
 
         return read_model
     raise AttributeError(name)

@@ -17,7 +17,7 @@ Without self-consistency runs (``--no-calibrate``) the q95 is the conservative s
 The self-consistency gap summarises **R calibration runs** (each its own target seed and
 optimizer seed). Each run has the budget of the fit it is compared with: the baseline's
 trials from the centre plus a control's trials from its best θ, as the tested gap is
-``gap_before``, the best baseline fit of any stage (see :mod:`physinfer.diagnose.workflow`).
+``gap_before``, the best baseline fit of any stage (see :mod:`physinfer.discrepancy.workflow`).
 Without the control the comparison is unfair exactly when it matters: a misspecified
 model's best fit often sits on a bound of its box (on the pendulum, maximal damping buys
 the missing drag's fast decay), a target made there is hard for a short search from the

@@ -23,7 +23,7 @@ matplotlib.use("Agg")  # files only; never needs a display
 import matplotlib.pyplot as plt  # noqa: E402, TID253
 import numpy as np  # noqa: E402
 
-from physinfer.diagnose.localise import SpectralMaps  # noqa: E402
+from physinfer.discrepancy.localise import SpectralMaps  # noqa: E402
 from physinfer.io import atomic_path  # noqa: E402
 
 
@@ -109,7 +109,7 @@ def gaps_figure(
         models: Dicts with ``label``, ``gap`` and ``distances`` (the ``K`` re-simulation
             distances), baseline first.
         floor: Median distance between re-simulations of the baseline fit.
-        scale: The null scale (see :mod:`physinfer.diagnose.decide`).
+        scale: The null scale (see :mod:`physinfer.discrepancy.decide`).
         threshold: The gap test's threshold (a significant effect is evidence too).
         named: Label of the named effect (highlighted), or ``None``.
 

@@ -1,6 +1,6 @@
 """One effect's detection limit: the rule's threshold at each rung, and where the refit gap clears it.
 
-Part of :mod:`physinfer.diagnose.limits` (the method is described there).
+Part of :mod:`physinfer.discrepancy.limits` (the method is described there).
 
 **The threshold of a rung.** The rule names an effect when the baseline's gap ``G`` beats
 what the augmented model leaves, ``A``, by more than the null scale ``S`` (``G − A > S``),
@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.diagnose.decide import DecisionRule, rank_test_less
-from physinfer.diagnose.ladder import (
+from physinfer.discrepancy.decide import DecisionRule, rank_test_less
+from physinfer.discrepancy.ladder import (
     Ladder,
     Probe,
     cross_median,
@@ -37,7 +37,7 @@ from physinfer.diagnose.ladder import (
     pairwise,
     pairwise_median,
 )
-from physinfer.diagnose.refit import RefitState, measured_refit, movers, predicted_refit
+from physinfer.discrepancy.refit import RefitState, measured_refit, movers, predicted_refit
 from physinfer.parameters import ParameterSpace
 
 

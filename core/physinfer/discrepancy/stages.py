@@ -1,7 +1,7 @@
 """The stages of a diagnosis: each a resumable refinement in its own directory, and its gap.
 
-:mod:`physinfer.diagnose.workflow` runs them in order and decides; the stages after the
-baseline do not depend on one another, so :mod:`physinfer.diagnose.parallel` may run them
+:mod:`physinfer.discrepancy.workflow` runs them in order and decides; the stages after the
+baseline do not depend on one another, so :mod:`physinfer.discrepancy.parallel` may run them
 first on worker processes with these same functions. Every stage writes its trials,
 selection and gap measurements to its directory, and a stage that finds them there
 continues from them — so the workflow's sequential pass then reads a stage a worker
@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.diagnose.candidates import augmented_pipeline, warm_start
-from physinfer.diagnose.gap import measure_gap
-from physinfer.diagnose.warmstart import warm_start_factory
+from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
+from physinfer.discrepancy.gap import measure_gap
+from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
+from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.noise import NoiseFloor, noise_seeds
-from physinfer.refine import Pipeline, RefineConfig, RefineResult, run_refinement
 from physinfer.registry import Registry
 from physinfer.roles import Effect, Target
 from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord
@@ -30,7 +30,7 @@ from physinfer.scene import scene_of
 from physinfer.session import fixed_by_user, optional_settings
 
 if TYPE_CHECKING:
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
 #: Called after each trial of a stage with its name, the trials done and the stage's budget.
 OnTrial = Callable[[str, int, int], None]

@@ -1,6 +1,6 @@
 """The baseline's reply to a rung (mimicry): how much of an effect's signature the base parameters reproduce.
 
-Part of :mod:`physinfer.diagnose.limits` (the method is described there). The baseline refit
+Part of :mod:`physinfer.discrepancy.limits` (the method is described there). The baseline refit
 to a rung cannot do worse than θ̂, and may do much better when its parameters reproduce the
 effect's signature. One forward-difference Jacobian of the baseline's mean embedding at θ̂
 (:func:`jacobian`, shared by every effect) gives each rung's linear refit
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.diagnose.ladder import Probe, cross_median
+from physinfer.discrepancy.ladder import Probe, cross_median
 from physinfer.parameters import ParameterSpace
 
 

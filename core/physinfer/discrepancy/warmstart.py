@@ -1,6 +1,6 @@
 """Warm starts: refine around a chosen point instead of around the centre.
 
-:func:`physinfer.refine.run_refinement` attaches the centre of ``[-1, 1]^D`` as its first
+:func:`physinfer.loop.run_refinement` attaches the centre of ``[-1, 1]^D`` as its first
 trial, and optimizers such as CMA-ES also centre their search there. An augmented model
 must instead start where the baseline ended — the baseline's best θ with the effect
 switched off — so that its budget is spent improving on the baseline, not re-finding it.

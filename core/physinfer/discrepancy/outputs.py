@@ -8,17 +8,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.diagnose.gap import gap_numbers
-from physinfer.diagnose.localise import localise
-from physinfer.diagnose.stages import Stage, clip_of
+from physinfer.discrepancy.gap import gap_numbers
+from physinfer.discrepancy.localise import localise
+from physinfer.discrepancy.stages import Stage, clip_of
+from physinfer.loop import RefineResult
 from physinfer.noise import NoiseFloor
-from physinfer.refine import RefineResult
 from physinfer.roles import Target
 from physinfer.scene import scene_of
 from physinfer.session import fixed_by_user, full_parameter_space, optional_settings
 
 if TYPE_CHECKING:
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
 
 def write_outputs(
@@ -37,8 +37,8 @@ def write_outputs(
     baseline: RefineResult,
 ) -> dict[str, Any]:
     """Localise, draw, write the model file and videos; assemble the report."""
-    from physinfer.diagnose.figures import plot_gaps, plot_maps
-    from physinfer.diagnose.model import write_model
+    from physinfer.discrepancy.figures import plot_gaps, plot_maps
+    from physinfer.discrepancy.model import write_model
 
     out = settings.out
     fit_before = clip_of(before.pipeline, before.best_params, target, settings.seed)

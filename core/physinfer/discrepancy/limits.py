@@ -4,14 +4,14 @@ A diagnosis that names nothing cannot tell "no effect is there" from "an effect 
 and this video could not show it". A measuring instrument states its detection limit; so
 does ``diagnose``. For each candidate effect, at the best baseline fit θ̂:
 
-1. **Ladder** (:mod:`physinfer.diagnose.ladder`). The augmented model is simulated at θ̂
+1. **Ladder** (:mod:`physinfer.discrepancy.ladder`). The augmented model is simulated at θ̂
    with the effect switched on at a few strengths (fractions of the way from *off* to the
    far end of its range, in normalised coordinates) under ``n`` fresh seeds each (one for a
    deterministic phenomenon). The *shift* of a rung is the median squared distance from its
    clips' embeddings to those of θ̂'s own re-simulations (the ``K`` clips of the noise
    floor, reused, not redone): the gap the baseline would leave against that target if it
    could not adapt. Its *own floor* is the median distance among its ``n`` clips.
-2. **Mimicry** (:mod:`physinfer.diagnose.refit`: the base parameters' reply). The baseline
+2. **Mimicry** (:mod:`physinfer.discrepancy.refit`: the base parameters' reply). The baseline
    refit to a rung cannot do worse than θ̂, and may do much better when its parameters
    reproduce the effect's signature. One Jacobian of the baseline's embedding at θ̂ (a
    forward difference per base parameter, ``n`` seeds each, shared by every effect) gives
@@ -19,7 +19,7 @@ does ``diagnose``. For each candidate effect, at the best baseline fit θ̂:
    line search along the linear step, Gauss–Newton from there) at the strongest rung and at
    the rung where the limit falls (at every rung for a deterministic phenomenon, where a
    rung is one simulation).
-3. **The rule's threshold** (:mod:`physinfer.diagnose.limit_rule`). An effect is named when
+3. **The rule's threshold** (:mod:`physinfer.discrepancy.limit_rule`). An effect is named when
    the baseline's gap ``G`` beats what the augmented model leaves, ``A``, by more than the
    null scale ``S``, pays for its ``k`` parameters (``A ≤ per_parameter_factor^k · G``) and
    the model is found misspecified — by the gap test (``G > misspecified_factor · S``) or by
@@ -33,9 +33,9 @@ does ``diagnose``. For each candidate effect, at the best baseline fit θ̂:
    parameters that moved), its own randomness hides it (the shift clears the threshold of a
    deterministic effect but not its own), or it leaves no signature above the null scale.
 
-**What would reveal it** (:mod:`physinfer.diagnose.reveal`): ``--fix`` of a base parameter
+**What would reveal it** (:mod:`physinfer.discrepancy.reveal`): ``--fix`` of a base parameter
 (free), another camera view and a twice longer clip (measured only when asked). The printed
-line is :func:`physinfer.diagnose.limit_text.limit_line`.
+line is :func:`physinfer.discrepancy.limit_text.limit_line`.
 """
 
 from __future__ import annotations
@@ -47,8 +47,8 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.diagnose.decide import DecisionRule
-from physinfer.diagnose.ladder import (
+from physinfer.discrepancy.decide import DecisionRule
+from physinfer.discrepancy.ladder import (
     Ladder,
     Probe,
     ladder_seeds,
@@ -57,12 +57,17 @@ from physinfer.diagnose.ladder import (
     strength_path,
     values_at,
 )
-from physinfer.diagnose.limit_rule import Threshold, effect_limit, interpolate_limit, required_gap
-from physinfer.diagnose.limit_text import limit_line, reveal_phrase, summary_phrase
-from physinfer.diagnose.refit import jacobian
-from physinfer.diagnose.reveal import reveal_by_fixing, reveal_by_setting
+from physinfer.discrepancy.limit_rule import (
+    Threshold,
+    effect_limit,
+    interpolate_limit,
+    required_gap,
+)
+from physinfer.discrepancy.limit_text import limit_line, reveal_phrase, summary_phrase
+from physinfer.discrepancy.refit import jacobian
+from physinfer.discrepancy.reveal import reveal_by_fixing, reveal_by_setting
+from physinfer.loop import Pipeline
 from physinfer.parameters import ParameterSpace
-from physinfer.refine import Pipeline
 
 __all__ = [
     "LimitConfig",
@@ -173,7 +178,7 @@ def detection_limits(
     """Every candidate's detection limit at θ̂, and what would lower it.
 
     Returns:
-        ``effects`` (name → :func:`~physinfer.diagnose.limit_rule.effect_limit`'s result with
+        ``effects`` (name → :func:`~physinfer.discrepancy.limit_rule.effect_limit`'s result with
         ``threshold`` — the rule's ``τ`` for a model leaving ``S`` — and ``reveal``),
         ``seeds``, ``refit_seeds``, ``deterministic``, ``simulations`` (the ladder's),
         ``diagnosis_simulations``, ``share``, ``config``, ``clip_seconds``, ``wall_time_s``.

@@ -9,7 +9,7 @@ floor** (what a perfect model would leave). The same seeds are used for every mo
 diagnosis, so gaps are compared pairwise. Measurements are cached as JSON in the stage's
 run directory, so an interrupted diagnosis does not redo them; the re-simulations'
 embeddings are kept beside it (NPZ), for the detection limits' ladder to reuse
-(:mod:`physinfer.diagnose.limits`).
+(:mod:`physinfer.discrepancy.limits`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from physinfer.io import atomic_save_npz, atomic_write_json
 from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
-    from physinfer.refine import Pipeline
+    from physinfer.loop import Pipeline
 
 GAP_FILE = "gap.json"
 

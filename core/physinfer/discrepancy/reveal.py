@@ -1,6 +1,6 @@
 """What would reveal an effect: the detection limit under ``--fix``, another camera view, a longer clip.
 
-Part of :mod:`physinfer.diagnose.limits` (the method is described there). Holding a base
+Part of :mod:`physinfer.discrepancy.limits` (the method is described there). Holding a base
 parameter at a known value (``--fix``) removes its column from the refit — free, from the
 same simulations (:func:`reveal_by_fixing`). Another camera view (the target's
 ``camera_elevation_deg`` / ``camera_azimuth_deg``, where its ζ has them) re-renders the
@@ -18,14 +18,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.diagnose.ladder import Ladder, Probe, moved_values, pairwise_median
-from physinfer.diagnose.limit_rule import Threshold, effect_limit
-from physinfer.diagnose.refit import jacobian_from
+from physinfer.discrepancy.ladder import Ladder, Probe, moved_values, pairwise_median
+from physinfer.discrepancy.limit_rule import Threshold, effect_limit
+from physinfer.discrepancy.refit import jacobian_from
 from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
 
 if TYPE_CHECKING:
-    from physinfer.diagnose.limits import LimitInputs
+    from physinfer.discrepancy.limits import LimitInputs
 
 Log = Callable[[str], None]
 

@@ -1,6 +1,6 @@
 """The detection-limit ladder: an effect switched on at a few strengths at θ̂, and its distances.
 
-Part of :mod:`physinfer.diagnose.limits` (the method is described there). This module only
+Part of :mod:`physinfer.discrepancy.limits` (the method is described there). This module only
 measures: which effect parameters a ladder moves (:func:`strength_path`), simulating and
 embedding at the target's ζ (:class:`Probe`), the rungs themselves (:func:`run_ladder`) and
 the two distance summaries every decision reads — the median distance between two sets of
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.loop import Pipeline, simulate_many, squared_distance
 from physinfer.parameters import ParameterSpace
-from physinfer.refine import Pipeline, simulate_many, squared_distance
 
 
 def strength_path(space: ParameterSpace) -> tuple[dict[str, tuple[float, float]], dict[str, float]]:

@@ -1,5 +1,5 @@
 """A diagnosis' detection-limit stage: each candidate's ladder at the best baseline fit,
-cached in ``limits.json`` (the method is :mod:`physinfer.diagnose.limits`)."""
+cached in ``limits.json`` (the method is :mod:`physinfer.discrepancy.limits`)."""
 
 from __future__ import annotations
 
@@ -8,18 +8,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.diagnose.candidates import augmented_pipeline
-from physinfer.diagnose.gap import measure_gap
-from physinfer.diagnose.stages import Stage
+from physinfer.discrepancy.candidates import augmented_pipeline
+from physinfer.discrepancy.gap import measure_gap
+from physinfer.discrepancy.stages import Stage
 from physinfer.io import atomic_write_json
+from physinfer.loop import Pipeline, RefineResult
 from physinfer.noise import noise_seeds
-from physinfer.refine import Pipeline, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.session import fixed_by_user
 
 if TYPE_CHECKING:
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
 
@@ -62,7 +62,7 @@ def run_limits(
     import dataclasses
     import json
 
-    from physinfer.diagnose.limits import LimitInputs, detection_limits
+    from physinfer.discrepancy.limits import LimitInputs, detection_limits
 
     theta = before.best_params
     fixed = fixed_by_user(base, settings.fixed)

@@ -1,16 +1,13 @@
-"""Progress of a diagnosis: one bar per stage on stderr, and the time each stage took.
+"""Rich progress bars, one per stage of a long job, on stderr (stdout stays for ``--json``).
 
-Stages that run side by side on workers (:mod:`physinfer.diagnose.parallel`) show their
-bars together; the workflow's stages one after another. Without ``enabled`` nothing is
-drawn, but :class:`StageClock` still times the stages for ``diagnosis.json``.
+Used by the diagnosis (stages side by side on workers show their bars together), by
+``posterior train`` (embedding, training) and ``evaluate calibration`` (embedding, sampling),
+and by :mod:`physinfer.api` when a caller asks for ``progress=True``.
 """
 
 from __future__ import annotations
 
 import threading
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 
@@ -55,21 +52,3 @@ class StageProgress:
             if stage not in self._tasks:
                 self._tasks[stage] = self._bar.add_task(stage, total=total)
             self._bar.update(self._tasks[stage], completed=done, total=total)
-
-
-class StageClock:
-    """Wall seconds per stage of this invocation (a stage resumed from disk takes ~0)."""
-
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = {}
-
-    @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
-        """Time the block as ``name``; a stage a worker already timed keeps its time."""
-        start = time.perf_counter()
-        yield
-        self.seconds.setdefault(name, time.perf_counter() - start)
-
-    def add(self, seconds: dict[str, float]) -> None:
-        """Times measured elsewhere (on workers)."""
-        self.seconds.update(seconds)

@@ -1,6 +1,6 @@
 """The detection limits in words: the verdict's line per candidate effect.
 
-Part of :mod:`physinfer.diagnose.limits`; reads the dictionaries it writes.
+Part of :mod:`physinfer.discrepancy.limits`; reads the dictionaries it writes.
 """
 
 from __future__ import annotations

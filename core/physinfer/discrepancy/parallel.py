@@ -5,7 +5,7 @@ control), the control, and one augmented model per effect. None needs another's 
 all start from the baseline's fit. :func:`prefetch_stages` sends them as jobs to
 :func:`physinfer.datasets.open_executor` — ``workers`` local processes, or the workers of a
 Dask scheduler — where :func:`run_job` runs the same stage functions
-(:mod:`physinfer.diagnose.stages`) the workflow runs, into the same directories. The
+(:mod:`physinfer.discrepancy.stages`) the workflow runs, into the same directories. The
 workflow then goes through its stages in order as before and finds each finished on disk,
 so the decisions are those of a diagnosis run in one process (each stage's optimizer and
 simulations are seeded by the stage alone).
@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.diagnose.progress import StageClock, StageProgress
-from physinfer.diagnose.stages import (
+from physinfer.discrepancy.progress import StageClock
+from physinfer.discrepancy.stages import (
     GapContext,
     ablated_stage,
     build_base,
@@ -41,10 +41,11 @@ from physinfer.diagnose.stages import (
     control_stage,
     effect_stage,
 )
+from physinfer.progress import StageProgress
 from physinfer.roles import Target
 
 if TYPE_CHECKING:
-    from physinfer.diagnose.workflow import DiagnoseSettings
+    from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
 
