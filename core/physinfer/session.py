@@ -153,11 +153,17 @@ def refine(
             duration_s = model_file.extra.get("duration_s")
         if not fixed:  # the values the diagnosis held fixed (diagnose --fix)
             fixed = [f"{name}={value!r}" for name, value in model_file.extra.get("fixed", {}).items()]
+        if not scene_set:  # the scene the diagnosis fitted it on (diagnose --scene-set)
+            scene_set = model_file.extra.get("scene") or {}
     pipeline = build_pipeline(
         registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
         duration_s=duration_s, embedder_frames=embedder_frames, scene_set=scene_set,
     )  # fmt: skip
     scene = scene_of(pipeline.phenomenon)
+    if model_file is not None:
+        from physinfer.discrepancy.model import check_model_scene
+
+        check_model_scene(model_file, model, pipeline.phenomenon, scene)
     fixed_values = fixed_by_user(pipeline, fixed)
     budget = steps if steps is not None else pipeline.phenomenon.default_steps
     config = RefineConfig(

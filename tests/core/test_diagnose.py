@@ -274,6 +274,30 @@ def test_model_file_round_trip_and_checks(tmp_path: Path):
         read_model(tmp_path / "missing.json")
 
 
+def test_refine_model_takes_the_scene_the_model_was_fitted_on(tmp_path: Path):
+    """``model.json`` records the diagnosis' scene: ``refine --model`` refines on it and
+    refuses another ``--scene-set`` before simulating anything."""
+    from physinfer.discrepancy.model import check_model_scene
+    from physinfer.plugins import load_registry
+    from physinfer.session import refine
+
+    registry, _ = load_registry()
+    flag = registry.get("phenomena", "flag").load()
+    space = ParameterSpace([ParameterSpec("wind_speed", (0.0, 10.0))])
+    scene = {"flag_length": 3.0, "flag_height": 2.0, "pinning": "hoist", "pole_height": 3.5}
+    write_model(tmp_path / "big.json", plugin="flag", effects=[], space=space, values={"wind_speed": 4.0},
+                scene=scene)
+    write_model(tmp_path / "plain.json", plugin="flag", effects=[], space=space, values={"wind_speed": 4.0})
+    big, plain = read_model(tmp_path / "big.json"), read_model(tmp_path / "plain.json")
+    check_model_scene(big, tmp_path / "big.json", flag, scene)  # its own scene: accepted
+    check_model_scene(plain, tmp_path / "plain.json", flag, None)
+    with pytest.raises(UserInputError, match="fitted on the default scene"):
+        check_model_scene(plain, tmp_path / "plain.json", flag, {**scene, "flag_length": 2.0})
+    with pytest.raises(UserInputError, match="fitted on flag_length=3.*drop --scene-set"):
+        refine(registry, plugin="flag", model=tmp_path / "big.json", scene_set={"flag_length": "1.5"},
+               steps=1, out=tmp_path / "run", progress=False)
+
+
 # ---------------------------------------------------------------------- end to end (pendulum)
 
 

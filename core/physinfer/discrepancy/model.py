@@ -118,3 +118,21 @@ def model_for_refine(path: Path, plugin: str, effects: Sequence[str]) -> ModelFi
             f"--effect {list(effects)} contradicts --model {path} (effects {list(model.effects)}); drop --effect"
         )
     return model
+
+
+def check_model_scene(model: ModelFile, path: Path, phenomenon: Any, scene: Mapping[str, Any] | None) -> None:
+    """Refuse to refine ``model`` on a scene other than the one its values were fitted on.
+
+    Raises:
+        UserInputError: ``--scene-set`` names another scene than ``model.json`` records
+            (no ``scene`` there: the phenomenon's defaults).
+    """
+    from physinfer.scene import same_scene, scene_text
+
+    fitted = model.extra.get("scene")
+    if not same_scene(phenomenon, scene, fitted):
+        raise UserInputError(
+            f"--model {path} was fitted on {scene_text(fitted)}, but this refinement's scene is "
+            f"{scene_text(scene)}; drop --scene-set (the model's scene is used) or diagnose again on this scene"
+        )
+
