@@ -12,7 +12,11 @@ simulation seeds), ``refine`` as it runs by default (the shipped posterior's sta
   and elevation (``physinfer.render_estimate``) — the texture, light and background stay
   unknown;
 - ``estimated ζ, phone``: the ``phone (all, 1080p 30 fps)`` condition, prepared, at the
-  estimated ζ.
+  estimated ζ;
+- ``as refine conditions it``: the clean render through the product's own conditioning
+  (:func:`physinfer.conditioning.condition_target`, framed as a wide video is): only the
+  estimated components that read well (``MIN_EXPLAINED``; for the flag the framing) replace
+  the defaults, the rest stay at the renderer's defaults — what ``refine --target`` does.
 
     PYOPENGL_PLATFORM=egl nice -n 10 .venv/bin/python benchmarks/bench_real_conditions_refine.py \
         --targets 4 --steps 16 --out runs/bench_real_conditions_refine
@@ -41,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import bench_real_conditions as brc  # noqa: E402
 import bench_refine  # noqa: E402
 
+from physinfer.conditioning import Conditioning, condition_target  # noqa: E402
 from physinfer.plugins import load_registry  # noqa: E402
 from physinfer.prepare import PrepareSettings, prepare_clip  # noqa: E402
 from physinfer.render_estimate import estimate_render_params  # noqa: E402
@@ -52,6 +57,7 @@ ARMS = {
     "default": "default ζ, prepared",
     "estimated": "estimated ζ, prepared",
     "phone": "estimated ζ, phone",
+    "refine": "as refine conditions it",
 }
 """``--arms`` keys and the labels of the rows."""
 
@@ -67,6 +73,13 @@ def arm_target(
             clip=clips["clean (oracle framing)"], truth=truth, render_params=target["zeta"]
         ), {}
     condition = "phone (all, 1080p 30 fps)" if arm.endswith("phone") else "clean → prepare"
+    if arm == ARMS["refine"]:
+        clip, estimated, record = condition_target(
+            pipeline.phenomenon, pipeline.embedder, clips[condition], Conditioning(prepare=True), {}
+        )
+        return Target(clip=clip, truth=truth, render_params={**default, **estimated}), record.get(
+            "render_estimate", {}
+        )
     settings = PrepareSettings(size=pipeline.embedder.size, fps=pipeline.embedder.fps)
     clip = prepare_clip(
         clips[condition], framing=pipeline.phenomenon.framing, settings=settings
