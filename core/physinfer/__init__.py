@@ -40,12 +40,16 @@ API_NAMES = (
     "infer",
     "train_posterior",
     "evaluate_calibration",
+    "prepare",
+    "render",
     "SimulateOptions",
     "RefineOptions",
     "DiagnoseOptions",
     "InferOptions",
     "PosteriorTrainOptions",
     "CalibrationOptions",
+    "PrepareOptions",
+    "RenderOptions",
 )
 
 

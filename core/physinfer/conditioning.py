@@ -1,5 +1,5 @@
 """Condition a user's video for comparison with simulations: frame it as the renderer frames
-its subject (:mod:`physinfer.prepare`) and read the camera's render parameters ζ from it
+its subject (:mod:`physinfer.framing`) and read the camera's render parameters ζ from it
 (:mod:`physinfer.render_estimate`).
 
 ``refine``, ``diagnose`` and ``infer`` run this on every ``--target`` video, so a phone clip
@@ -75,12 +75,12 @@ def parse_roi(text: str | None) -> Box | None:
 
 
 def frame_clip(phenomenon: Any, embedder: Any, clip: Clip, roi: Box | None) -> tuple[Clip, dict[str, Any]]:
-    """``clip`` framed, steadied and resampled as the embedder reads (:func:`physinfer.prepare.prepare_clip`).
+    """``clip`` framed, steadied and resampled as the embedder reads (:func:`physinfer.framing.prepare_clip`).
 
     Returns:
         The framed clip and what was found (``box``, ``square``, shake, ``warnings``, ...).
     """
-    from physinfer.prepare import PrepareSettings, default_framing, prepare_clip
+    from physinfer.framing import PrepareSettings, default_framing, prepare_clip
 
     size = int(getattr(embedder, "size", 224)) if embedder is not None else 224
     fps = float(embedder.fps) if embedder is not None else None

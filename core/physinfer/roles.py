@@ -266,7 +266,7 @@ class Phenomenon:
         framing: ``(box) -> square``: maps the box ``(x, y, w, h)`` in pixels of the
             region that moves in a video to the square ``(x, y, side, side)`` the
             renderer frames at its default ζ (``physinfer prepare``); ``None``:
-            :func:`physinfer.prepare.default_framing`, the box's centre with a margin.
+            :func:`physinfer.framing.default_framing`, the box's centre with a margin.
         scene_settings: Known, non-inferred settings of the scene (a flag's size and
             pinning), :class:`physinfer.scene.SceneSetting` records the user sets with
             ``--scene-set NAME=VALUE``. A phenomenon that declares any must accept the

@@ -103,6 +103,8 @@ def _cli_parameters(*path: str) -> set[str]:
         (("diagnose",), pi.DiagnoseOptions),
         (("posterior", "train"), pi.PosteriorTrainOptions),
         (("evaluate", "calibration"), pi.CalibrationOptions),
+        (("prepare",), pi.PrepareOptions),
+        (("render",), pi.RenderOptions),
     ],
 )
 def test_every_cli_option_is_a_field_of_the_commands_options_and_back(command, options):

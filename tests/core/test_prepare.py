@@ -1,4 +1,4 @@
-""":mod:`physinfer.prepare` on generated, H.264-encoded videos: a moving patch over a static
+""":mod:`physinfer.framing` on generated, H.264-encoded videos: a moving patch over a static
 texture, with and without camera shake, and the inputs it must refuse.
 
 The flag's own framing on composited flag renders is tested in
@@ -15,7 +15,7 @@ import pytest
 from PIL import Image
 
 from physinfer.errors import UserInputError
-from physinfer.prepare import PrepareSettings, default_framing, prepare_clip
+from physinfer.framing import PrepareSettings, default_framing, prepare_clip
 from physinfer.testing.footage import textured_background
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video
@@ -167,3 +167,17 @@ def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_pa
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 2 and "pass it with --fps" in json.loads(proc.stdout)["error"]
+
+
+def test_the_api_prepares_without_writing_and_draws_the_overlay(still_camera, tmp_path):
+    from matplotlib.figure import Figure
+
+    import physinfer
+
+    write_video(tmp_path / "in.mp4", Clip(still_camera.frames[:12], still_camera.fps))
+    video = physinfer.prepare("pendulum", target=tmp_path / "in.mp4", size=64, no_render_estimate=True)
+    assert video.clip.frames.shape[1:] == (64, 64, 3) and video.paths == {}
+    assert video.to_dict()["roi_source"] == "found" and video.render_estimate is None
+    assert isinstance(video.plot(), Figure) and list(tmp_path.iterdir()) == [tmp_path / "in.mp4"]
+    with pytest.raises(UserInputError, match="would overwrite --target"):
+        physinfer.prepare("pendulum", target=tmp_path / "in.mp4", out=tmp_path / "in.mp4")

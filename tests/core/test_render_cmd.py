@@ -272,3 +272,18 @@ def test_cli_refusals_exit_2_before_rendering(tmp_path):
         and "Traceback" not in proc.stderr
     )
     assert not (tmp_path / "o.mp4").exists()
+
+
+def test_the_api_renders_a_trajectory_file_and_returns_the_clip(tmp_path):
+    from pendulum_example.physics import make_simulator
+
+    import physinfer
+
+    trajectory = make_simulator().simulate({"length": 0.8, "damping": 0.1, "amplitude": 30.0})
+    Trajectory(trajectory.vertices[:4], trajectory.faces, trajectory.fps, trajectory.extras).save(
+        tmp_path / "p.npz"
+    )
+    rendering = physinfer.render("pendulum", trajectory=tmp_path / "p.npz", render_set={"size": 32})
+    assert rendering.clip.frames.shape == (4, 32, 32, 3) and rendering.paths == {}
+    assert rendering.to_dict()["n_frames"] == 4 and rendering.to_dict()["source"] == "npz"
+    assert len(rendering.plot(n=2).axes) == 2

@@ -4,7 +4,7 @@ it by default."""
 
 import numpy as np
 
-from physinfer.prepare import PrepareSettings, prepare_clip
+from physinfer.framing import PrepareSettings, prepare_clip
 from physinfer.static_background import freeze_static
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video

@@ -22,12 +22,12 @@ replacing its fields. The CLI is a thin shell over these functions. Nothing is p
 from __future__ import annotations
 
 import contextlib
-import functools
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from physinfer.api.footage import PreparedVideo, Rendering, prepare, render
 from physinfer.api.options import (
     CalibrationOptions,
     DiagnoseOptions,
@@ -35,7 +35,9 @@ from physinfer.api.options import (
     InferOptions,
     ModelOptions,
     PosteriorTrainOptions,
+    PrepareOptions,
     RefineOptions,
+    RenderOptions,
     SearchOptions,
     SimulateOptions,
     TargetOptions,
@@ -43,6 +45,7 @@ from physinfer.api.options import (
     as_names,
     with_settings,
 )
+from physinfer.api.plugins import registry
 from physinfer.api.results import Diagnosis, Simulation
 from physinfer.errors import UserInputError
 
@@ -54,7 +57,11 @@ __all__ = [
     "InferOptions",
     "ModelOptions",
     "PosteriorTrainOptions",
+    "PrepareOptions",
+    "PreparedVideo",
     "RefineOptions",
+    "RenderOptions",
+    "Rendering",
     "SearchOptions",
     "SimulateOptions",
     "Simulation",
@@ -62,22 +69,16 @@ __all__ = [
     "diagnose",
     "evaluate_calibration",
     "infer",
+    "prepare",
     "refine",
     "registry",
+    "render",
     "simulate",
     "train_posterior",
 ]
 
 #: ``progress``: ``True`` for rich bars on stderr, or ``(done, total, best_distance) -> None``.
 Progress = bool | Callable[[int, int, float], None]
-
-
-@functools.cache
-def registry() -> Any:
-    """The registry of every installed plugin, loaded once per process."""
-    from physinfer.plugins import load_registry
-
-    return load_registry()[0]
 
 
 def _optional(path: Path | str | None) -> Path | None:

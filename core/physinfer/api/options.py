@@ -284,6 +284,63 @@ class CalibrationOptions:
     device: str | None = None
 
 
+@dataclass(frozen=True)
+class PrepareOptions:
+    """``physinfer prepare``.
+
+    Attributes:
+        target: Video to prepare (mp4/mov/..., gif or an image folder).
+        out: Prepared video (``.mp4``/``.gif``); ``NAME.json`` and ``NAME_overlay.png`` go
+            beside it (``None``: nothing written; the prepared clip is returned).
+        roi: ``"x,y,w,h"`` or four numbers in the input's pixels: the region the subject
+            moves in, instead of the one found.
+        fps: Frame rate of ``target`` when the file does not say.
+        embedder: Embedder whose frame rate and input size to prepare for (``None``: the
+            phenomenon's).
+        size: Side of the square output in pixels (``None``: the embedder's).
+        start: Seconds trimmed from the start.
+        duration: Seconds kept from ``start`` (``None``: to the end).
+        no_stabilise: Do not measure or remove camera shake.
+        no_freeze: Keep the flicker of pixels that do not move (by default they are set to
+            their temporal median, as a renderer draws a static background).
+        no_render_estimate: Do not estimate the camera's render parameters ζ.
+    """
+
+    target: Path | None = None
+    out: Path | None = None
+    roi: str | tuple[float, float, float, float] | None = None
+    fps: float | None = None
+    embedder: str | None = None
+    size: int | None = None
+    start: float = 0.0
+    duration: float | None = None
+    no_stabilise: bool = False
+    no_freeze: bool = False
+    no_render_estimate: bool = False
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """``physinfer render``: draw a trajectory file with a phenomenon's renderer.
+
+    Attributes:
+        trajectory: Trajectory NPZ (``simulate --trajectory-out``, a run's
+            ``best_trajectory.npz``) or a folder of per-frame ``.obj`` meshes in physinfer's
+            frame (metres, z up, wind along +x).
+        out: Video to write (``.mp4``/``.gif``; ``None``: none, the clip is returned).
+        fps: Frame rate of the trajectory: required for OBJ folders, overrides an NPZ's.
+        render_set: Render settings ζ, ``{NAME: VALUE}``.
+        scene_set: The scene's settings (the flag's ``pole_height`` draws a pole for meshes
+            that carry none), ``{NAME: VALUE}``.
+    """
+
+    trajectory: Path | None = None
+    out: Path | None = None
+    fps: float | None = None
+    render_set: Mapping[str, Any] = field(default_factory=dict)
+    scene_set: Mapping[str, Any] = field(default_factory=dict)
+
+
 Options = TypeVar(
     "Options",
     SimulateOptions,
@@ -292,6 +349,8 @@ Options = TypeVar(
     InferOptions,
     PosteriorTrainOptions,
     CalibrationOptions,
+    PrepareOptions,
+    RenderOptions,
 )
 
 

@@ -75,16 +75,7 @@ class Simulation:
         """
         if self.clip is None:
             raise ValueError("this simulation was not rendered (simulate(..., render=True))")
-        from matplotlib.figure import Figure
-
-        frames = self.clip.frames
-        picks = np.linspace(0, len(frames) - 1, num=min(n, len(frames))).round().astype(int)
-        fig = Figure(figsize=(2.2 * len(picks), 2.4), layout="constrained")
-        for ax, i in zip(fig.subplots(1, len(picks), squeeze=False)[0], picks, strict=True):
-            ax.imshow(frames[i])
-            ax.set_title(f"t = {i / self.clip.fps:.2f} s", fontsize=8)
-            ax.axis("off")
-        return fig
+        return frames_figure(self.clip, n)
 
 
 @dataclass
@@ -144,3 +135,18 @@ class Diagnosis:
             threshold=self.report["threshold"],
             named=self.named_effect,
         )
+
+
+def frames_figure(clip: Clip, n: int = 6) -> Any:
+    """``n`` evenly spaced frames of ``clip`` side by side, each titled with its time (a
+    matplotlib figure, no pyplot state)."""
+    from matplotlib.figure import Figure
+
+    frames = clip.frames
+    picks = np.linspace(0, len(frames) - 1, num=min(n, len(frames))).round().astype(int)
+    fig = Figure(figsize=(2.2 * len(picks), 2.4), layout="constrained")
+    for ax, i in zip(fig.subplots(1, len(picks), squeeze=False)[0], picks, strict=True):
+        ax.imshow(frames[i])
+        ax.set_title(f"t = {i / clip.fps:.2f} s", fontsize=8)
+        ax.axis("off")
+    return fig

@@ -1,7 +1,7 @@
 """``physinfer prepare``: frame a real video as the phenomenon's renderer frames its subject.
 
 Registered as a command by physinfer's built-in plugin; the work is done by
-:func:`physinfer.prepare.prepare_clip`. Writes the prepared clip (``--out``), a JSON
+:func:`physinfer.framing.prepare_clip`. Writes the prepared clip (``--out``), a JSON
 beside it (``prepared.json``: the box, the framing square, the shake, the frame rates,
 the frames kept, and the render parameters ζ estimated from the prepared clip by
 :func:`physinfer.render_estimate.estimate_render_params` unless ``--no-render-estimate``) and an overlay PNG (``prepared_overlay.png``) to check the box by eye.
@@ -9,15 +9,12 @@ the frames kept, and the render parameters ζ estimated from the prepared clip b
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
-from physinfer.conditioning import parse_roi
-from physinfer.errors import UserInputError
 
 
 @handle_errors()
@@ -84,72 +81,29 @@ def prepare_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
-    from physinfer.cli.app import registry_and_infos
-    from physinfer.io import atomic_write_json
-    from physinfer.prepare import PrepareSettings, default_framing, prepare_clip, save_overlay
-    from physinfer.video import read_video, write_video
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.options import options_from_cli
 
-    paths = output_paths(out, target)
-    # Options are checked before the embedder (and torch) loads: a typo should cost nothing.
-    settings = PrepareSettings(
-        roi=parse_roi(roi),
-        start_s=start,
-        duration_s=duration,
-        stabilise=not no_stabilise,
-        freeze_background=not no_freeze,
-        size=size or 224,
-    )
-    settings.validate()
-    registry, _ = registry_and_infos()
-    phenomenon = registry.phenomenon(plugin)
-    name = embedder or phenomenon.default_embedder
-    embedder_obj = registry.embedder(name, model=None, device="cpu")
-    settings = replace(
-        settings,
-        size=int(size if size is not None else getattr(embedder_obj, "size", 224)),
-        fps=float(embedder_obj.fps),
-    )
-    settings.validate()
-    clip = read_video(target, fps=fps)
-    with err_console.status(f"preparing {clip.n_frames} frames of {target.name}"):
-        result = prepare_clip(
-            clip, framing=phenomenon.framing or default_framing, settings=settings
-        )
-    write_video(paths["video"], result.clip)
-    save_overlay(result, paths["overlay"])
-    estimate = None
-    if not no_render_estimate:
-        from physinfer.render_estimate import estimate_render_params
-
-        with err_console.status("estimating the camera's render parameters"):
-            estimate = estimate_render_params(phenomenon, result.clip, embedder=embedder_obj)
-    summary: dict[str, Any] = {
-        "plugin": plugin,
-        "target": str(target),
-        "embedder": name,
-        **result.to_dict(),
-        "render_estimate": estimate,
-        "video": str(paths["video"]),
-        "overlay": str(paths["overlay"]),
-        "json": str(paths["json"]),
-    }
-    atomic_write_json(paths["json"], summary)
+    with err_console.status(f"preparing {target.name}"):
+        video = api.prepare(plugin, options_from_cli(api.PrepareOptions, given))
     if as_json:
-        emit_json(summary)
+        emit_json(video.to_dict())
         return
+    result, size = video.prepared, video.clip.size[0]
     x, y, w, h = result.box
     err_console.print(
         f"{result.roi_source} box x={x:.0f} y={y:.0f} w={w:.0f} h={h:.0f}; shake {result.shake_rms_px:.2f} px rms "
         f"({'removed, residual ' + format(result.residual_rms_px, '.2f') + ' px' if result.stabilised else 'left'}); "
-        f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {settings.size}×{settings.size}",
+        f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {size}×{size}",
         highlight=False,
     )
-    if estimate is not None:
-        err_console.print(render_estimate_line(estimate), highlight=False)
+    if video.render_estimate is not None:
+        err_console.print(render_estimate_line(video.render_estimate), highlight=False)
     for warning in result.warnings:
         err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
     err_console.print(
-        f"wrote {paths['video']}, {paths['json']}, {paths['overlay']} (check the box)",
+        f"wrote {video.paths['video']}, {video.paths['json']}, {video.paths['overlay']} (check the box)",
         highlight=False,
     )
 
@@ -160,22 +114,3 @@ def render_estimate_line(estimate: dict[str, Any]) -> str:
         return f"render parameters not estimated: {estimate.get('note', '')}"
     parts = [f"{k}={v:g} (±{estimate['sd'][k]:.2g})" for k, v in estimate["values"].items()]
     return "estimated render parameters (pass with --render-set): " + ", ".join(parts)
-
-
-def output_paths(out: Path, target: Path) -> dict[str, Path]:
-    """The video, JSON and overlay paths of ``--out``; refuses a bad or clobbering ``--out``."""
-    if out.suffix.lower() not in (".mp4", ".gif"):
-        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
-    paths = {
-        "video": out,
-        "json": out.with_suffix(".json"),
-        "overlay": out.with_name(f"{out.stem}_overlay.png"),
-    }
-    for path in paths.values():
-        if path.is_dir():
-            raise UserInputError(f"--out: {path} is a directory; give a file name")
-        if target.exists() and path.exists() and path.resolve() == target.resolve():
-            raise UserInputError(
-                f"--out: writing {path} would overwrite --target; choose another name"
-            )
-    return paths

@@ -9,9 +9,8 @@ by physinfer's built-in plugin; works for every phenomenon whose renderer draws 
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
@@ -22,9 +21,7 @@ from physinfer.cli.app import (
     emit_json,
     err_console,
     handle_errors,
-    parse_render_set,
 )
-from physinfer.errors import UserInputError
 
 
 @handle_errors()
@@ -57,49 +54,15 @@ def render_cmd(
     The renderer frames the sheet from the trajectory's own size; of the scene settings, the
     flag's ``pole_height`` draws the pole of a trajectory that carries none (OBJ meshes).
     """
-    from physinfer.cli.app import registry_and_infos
-    from physinfer.meshio import load_trajectory
-    from physinfer.video import write_video
+    given = dict(locals())
+    from physinfer import api
+    from physinfer.cli.options import options_from_cli
 
-    if out.suffix.lower() not in (".mp4", ".gif"):
-        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
-    if out.is_dir():
-        raise UserInputError(f"--out {out} is a directory; give a file name")
-    from physinfer.scene import bind_scene, parse_scene_set, resolve_scene
-
-    registry, _ = registry_and_infos()
-    phenomenon = registry.phenomenon(plugin)
-    scene = resolve_scene(phenomenon, parse_scene_set(scene_set))
-    renderer = bind_scene(phenomenon, scene).make_renderer()
-    # ζ and the file are checked before any rendering, as simulate checks ζ before simulating.
-    zeta = renderer.check_render_params(
-        {**renderer.default_render_params, **parse_render_set(render_set)}
-    )
-    loaded = load_trajectory(trajectory, fps)
-    t0 = time.perf_counter()
-    try:
-        clip = renderer.render(loaded, zeta)
-    finally:
-        renderer.close()
-    render_s = time.perf_counter() - t0
-    write_video(out, clip)
-    result: dict[str, Any] = {
-        "plugin": plugin,
-        "trajectory": str(trajectory),
-        "source": "obj" if trajectory.is_dir() else "npz",
-        "n_frames": loaded.n_frames,
-        "n_vertices": int(loaded.vertices.shape[1]),
-        "n_faces": int(loaded.faces.shape[0]),
-        "fps": loaded.fps,
-        "uv": "uv" in loaded.extras,
-        "render_params": zeta,
-        **({"scene": scene} if scene is not None else {}),
-        "render_s": render_s,
-        "video": str(out),
-    }
+    rendering = api.render(plugin, options_from_cli(api.RenderOptions, given))
     if as_json:
-        emit_json(result)
+        emit_json(rendering.to_dict())
     else:
         err_console.print(
-            f"rendered {loaded.n_frames} frames at {loaded.fps:g} fps to {out}", highlight=False
+            f"rendered {rendering.loaded.n_frames} frames at {rendering.loaded.fps:g} fps to {out}",
+            highlight=False,
         )

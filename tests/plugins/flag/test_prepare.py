@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from physinfer.prepare import PrepareSettings, prepare_clip
+from physinfer.framing import PrepareSettings, prepare_clip
 from physinfer.testing.footage import textured_background
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video

@@ -1,4 +1,4 @@
-"""What :func:`physinfer.prepare.prepare_clip` takes and gives: the framing rule, the
+"""What :func:`physinfer.framing.prepare_clip` takes and gives: the framing rule, the
 settings, and the prepared clip with what was found."""
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.prepare.region import find_moving_box, motion_energy
-from physinfer.prepare.settings import Box
+from physinfer.framing.region import find_moving_box, motion_energy
+from physinfer.framing.settings import Box
 
 MIN_SHAKE_RMS_PX = 0.25
 """Shifts whose rms is below this many pixels are not compensated (only blur would result)."""

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from physinfer.prepare.settings import Box
+from physinfer.framing.settings import Box
 
 ANALYSIS_SIDE = 640
 """Longer side in pixels of the grayscale copy the analysis runs on (a 1920×1080 video is

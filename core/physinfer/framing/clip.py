@@ -6,16 +6,16 @@ from __future__ import annotations
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.prepare.checks import check_not_static, check_roi, check_square, trim_range
-from physinfer.prepare.frames import analysis_frames, crop_square
-from physinfer.prepare.region import edge_fraction, energy_stats, find_moving_box, motion_energy
-from physinfer.prepare.settings import (
+from physinfer.framing.checks import check_not_static, check_roi, check_square, trim_range
+from physinfer.framing.frames import analysis_frames, crop_square
+from physinfer.framing.region import edge_fraction, energy_stats, find_moving_box, motion_energy
+from physinfer.framing.settings import (
     FramingRule,
     PreparedClip,
     PrepareSettings,
     default_framing,
 )
-from physinfer.prepare.shake import (
+from physinfer.framing.shake import (
     MIN_SHAKE_RMS_PX,
     background_weight,
     estimate_shifts,

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.prepare.settings import Box
+from physinfer.framing.settings import Box
 from physinfer.types import Clip
 
 

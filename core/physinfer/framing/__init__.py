@@ -3,20 +3,20 @@
 A phone video of a flag is not what a renderer makes: the flag sits somewhere in a wide
 frame, the camera shakes, the frame rate is 30 or 60 fps. :func:`prepare_clip` turns it
 into a clip framed as the phenomenon's renderer frames its subject, so that a refinement
-compares like with like (the steps in order: :mod:`physinfer.prepare.clip`):
+compares like with like (the steps in order: :mod:`physinfer.framing.clip`):
 
-1. **Camera shake** (:mod:`physinfer.prepare.shake`): each frame's global shift against
+1. **Camera shake** (:mod:`physinfer.framing.shake`): each frame's global shift against
    the middle frame, by phase correlation on the static background (the moving region
    masked out), refined to 1/20 px by a local upsampled DFT (Guizar-Sicairos et al. 2008).
    A shake under :data:`MIN_SHAKE_RMS_PX` is left alone (resampling would only blur).
-2. **The moving region** (:mod:`physinfer.prepare.region`): the mean absolute difference
+2. **The moving region** (:mod:`physinfer.framing.region`): the mean absolute difference
    of consecutive steadied frames (motion energy), smoothed, thresholded relative to its
    own distribution (median and MAD of the map; seeds at a fraction of the peak, grown down
    to a lower level, as hysteresis thresholding does), the strongest connected component's
    bounding box.
 3. **Framing**: the phenomenon's rule maps that box to the square its renderer frames
    (:attr:`physinfer.roles.Phenomenon.framing`; :func:`default_framing` otherwise).
-4. **Crop, scale, trim, resample** (:mod:`physinfer.prepare.frames`): every frame is cut
+4. **Crop, scale, trim, resample** (:mod:`physinfer.framing.frames`): every frame is cut
    at the square moved by its shift (sub-pixel, Pillow's bilinear resize with a box),
    scaled to ``size`` × ``size``, the kept span trimmed, the static background frozen
    (noise and compression flicker removed where nothing moves,
@@ -25,9 +25,9 @@ compares like with like (the steps in order: :mod:`physinfer.prepare.clip`):
 
 Everything is reported in a :class:`PreparedClip` (box and square in the input's pixels,
 per-frame shifts, shake and residual shake in pixels, frames kept, warnings;
-:mod:`physinfer.prepare.settings`), and :func:`save_overlay`
-(:mod:`physinfer.prepare.overlay`) draws the box and the square on a frame for the user to
-check. Refuses (:mod:`physinfer.prepare.checks`), with one line each: a static video, a
+:mod:`physinfer.framing.settings`), and :func:`save_overlay`
+(:mod:`physinfer.framing.overlay`) draws the box and the square on a frame for the user to
+check. Refuses (:mod:`physinfer.framing.checks`), with one line each: a static video, a
 video in which nothing stands out as moving (with the ``--roi`` way out), a subject that
 leaves the frame for most of the clip, a region of interest outside the frame. numpy,
 scipy and Pillow only.
@@ -41,11 +41,11 @@ re-exported here.
 
 from __future__ import annotations
 
-from physinfer.prepare.checks import check_not_static, check_roi, check_square, trim_range
-from physinfer.prepare.clip import prepare_clip
-from physinfer.prepare.frames import ANALYSIS_SIDE, analysis_frames, crop_square
-from physinfer.prepare.overlay import save_overlay
-from physinfer.prepare.region import (
+from physinfer.framing.checks import check_not_static, check_roi, check_square, trim_range
+from physinfer.framing.clip import prepare_clip
+from physinfer.framing.frames import ANALYSIS_SIDE, analysis_frames, crop_square
+from physinfer.framing.overlay import overlay_figure, save_overlay
+from physinfer.framing.region import (
     MIN_CONTRAST,
     MIN_SIGNIFICANCE,
     edge_fraction,
@@ -53,7 +53,7 @@ from physinfer.prepare.region import (
     find_moving_box,
     motion_energy,
 )
-from physinfer.prepare.settings import (
+from physinfer.framing.settings import (
     DEFAULT_MARGIN,
     Box,
     FramingRule,
@@ -61,7 +61,7 @@ from physinfer.prepare.settings import (
     PrepareSettings,
     default_framing,
 )
-from physinfer.prepare.shake import (
+from physinfer.framing.shake import (
     MIN_SHAKE_RMS_PX,
     background_change,
     background_weight,
@@ -98,6 +98,7 @@ __all__ = [
     "motion_energy",
     "prepare_clip",
     "rms_about_mean",
+    "overlay_figure",
     "save_overlay",
     "shift_frames",
     "trim_range",

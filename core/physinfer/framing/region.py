@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.prepare.settings import Box
+from physinfer.framing.settings import Box
 
 
 def motion_energy(steady: np.ndarray) -> np.ndarray:

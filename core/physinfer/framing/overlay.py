@@ -3,25 +3,30 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from physinfer.prepare.settings import PreparedClip
+from physinfer.framing.settings import PreparedClip
 
 
 def save_overlay(result: PreparedClip, path: str | Path) -> Path:
-    """A PNG of the reference frame with the moving box (or roi) and the cropped square drawn.
-
-    Written atomically; matplotlib with the Agg backend.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
-
+    """:func:`overlay_figure` as a PNG, written atomically."""
     from physinfer.io import atomic_path
 
+    fig = overlay_figure(result)
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png")
+    return path
+
+
+def overlay_figure(result: PreparedClip) -> Any:
+    """The reference frame with the moving box (or roi) and the cropped square drawn (a
+    matplotlib figure, no pyplot state)."""
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
     height, width = result.input_size
-    fig = plt.figure(figsize=(8, 8 * height / width), dpi=max(100, width / 8))
+    fig = Figure(figsize=(8, 8 * height / width), dpi=max(100, width / 8))
     ax = fig.add_axes((0, 0, 1, 1))
     ax.imshow(result.preview)
     x, y, w, h = result.box
@@ -54,8 +59,4 @@ def save_overlay(result: PreparedClip, path: str | Path) -> Path:
         bbox={"facecolor": "black", "alpha": 0.6, "pad": 2},
     )
     ax.axis("off")
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return path
+    return fig
