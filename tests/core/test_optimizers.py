@@ -113,3 +113,19 @@ def test_ax_drops_only_its_duplicate_point_fallback_warning():
     finally:
         logger.removeHandler(handler)
     assert seen == ["a warning worth reading"]
+
+
+def test_ax_silences_botorchs_reissued_gp_fit_warning_only():
+    import warnings
+
+    from physinfer.optimizers.ax import AxOptimizer
+
+    AxOptimizer(dim=1, seed=0)
+    with warnings.catch_warnings(record=True) as seen:
+        # as botorch.fit re-issues it: warn_explicit with the file's path as its module
+        warnings.warn_explicit(
+            "`scipy_minimize` terminated with status OptimizationStatus.FAILURE, displaying ...",
+            RuntimeWarning, "/site-packages/botorch/fit.py", 241,
+        )  # fmt: skip
+        warnings.warn_explicit("a warning worth reading", RuntimeWarning, "/elsewhere/mine.py", 1)
+    assert [str(w.message) for w in seen] == ["a warning worth reading"]

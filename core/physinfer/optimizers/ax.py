@@ -32,6 +32,10 @@ def _quiet_ax() -> None:
     import warnings
 
     warnings.filterwarnings("ignore", module="(ax|botorch|gpytorch|linear_operator).*")
+    # BoTorch re-issues a failed GP-fit step with warn_explicit, whose "module" is the file's
+    # full path, which the filter above does not match. The fit goes on from its best state
+    # (and a fit that fails outright is handled below), so for a user it is noise.
+    warnings.filterwarnings("ignore", message="`scipy_minimize` terminated with status")
 
 
 class _DropDuplicateFallback(logging.Filter):
