@@ -43,6 +43,7 @@ from physinfer.api.options import (
     TargetOptions,
     as_assignments,
     as_names,
+    required,
     with_settings,
 )
 from physinfer.api.plugins import registry
@@ -331,12 +332,6 @@ def _staged_progress(progress: StagedProgress) -> Iterator[Callable[[str, int, i
         yield bars.update
 
 
-def _required(value: Path | str | None, option: str, what: str) -> Path:
-    if value is None:
-        raise UserInputError(f"{option}: give {what}")
-    return Path(value)
-
-
 def train_posterior(
     plugin: str,
     options: PosteriorTrainOptions | None = None,
@@ -364,8 +359,8 @@ def train_posterior(
     from physinfer.posterior.train_workflow import train_posterior as run
 
     o = with_settings(PosteriorTrainOptions, options, settings)
-    data = _required(o.data, "data", "the dataset directory (physinfer dataset generate)")
-    out = _required(o.out, "out", "the estimator file to write (*.safetensors)")
+    data = required(o.data, "data", "the dataset directory (physinfer dataset generate)")
+    out = required(o.out, "out", "the estimator file to write (*.safetensors)")
     network = NetworkConfig(
         density=o.density, max_epochs=o.max_epochs, stop_after_epochs=o.patience, ensemble=o.ensemble
     )
@@ -402,7 +397,7 @@ def evaluate_calibration(
     from physinfer.posterior.calibrate_workflow import evaluate_calibration as run
 
     o = with_settings(CalibrationOptions, options, settings)
-    data = _required(o.data, "data", "a dataset of held-out simulations (physinfer dataset generate)")
+    data = required(o.data, "data", "a dataset of held-out simulations (physinfer dataset generate)")
     with _staged_progress(progress) as report:
         return run(
             registry(), plugin=plugin, data=data, out=_optional(o.out) or _default_out(f"calibration-{plugin}"),

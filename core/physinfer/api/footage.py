@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from physinfer.api.options import PrepareOptions, RenderOptions, with_settings
+from physinfer.api.options import PrepareOptions, RenderOptions, required, with_settings
 from physinfer.errors import UserInputError
 from physinfer.types import Clip
 
@@ -83,9 +83,7 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
     from physinfer.video import read_video
 
     o = with_settings(PrepareOptions, options, settings)
-    if o.target is None:
-        raise UserInputError("target: give the video to prepare")
-    target = Path(o.target)
+    target = required(o.target, "target", "the video to prepare")
     paths = None if o.out is None else output_paths(Path(o.out), target)
     roi = parse_roi(o.roi) if isinstance(o.roi, str) else o.roi
     # Settings are checked before the embedder (and torch) loads: a typo should cost nothing.
@@ -215,8 +213,7 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
     from physinfer.scene import bind_scene, resolve_scene
 
     o = with_settings(RenderOptions, options, settings)
-    if o.trajectory is None:
-        raise UserInputError("trajectory: give a trajectory NPZ or a folder of .obj meshes")
+    trajectory = required(o.trajectory, "trajectory", "a trajectory NPZ or a folder of .obj meshes")
     out = None if o.out is None else Path(o.out)
     if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
@@ -228,13 +225,13 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
     try:
         # ζ and the file are checked before any rendering, as simulate checks ζ before simulating.
         zeta = renderer.check_render_params({**renderer.default_render_params, **o.render_set})
-        loaded = load_trajectory(Path(o.trajectory), o.fps)
+        loaded = load_trajectory(trajectory, o.fps)
         t0 = time.perf_counter()
         clip = renderer.render(loaded, zeta)
         seconds = time.perf_counter() - t0
     finally:
         renderer.close()
-    rendering = Rendering(plugin, Path(o.trajectory), loaded, clip, zeta, scene, seconds)
+    rendering = Rendering(plugin, trajectory, loaded, clip, zeta, scene, seconds)
     if out is not None:
         from physinfer.video import write_video
 

@@ -397,3 +397,14 @@ def as_names(value: Sequence[str] | str, what: str) -> tuple[str, ...]:
     if not all(isinstance(item, str) for item in value):
         raise UserInputError(f"{what}: give names (strings), got {list(value)!r}")
     return tuple(value)
+
+
+def required(value: Path | str | None, field_name: str, what: str) -> Path:
+    """``value`` as a path; a setting a command cannot run without.
+
+    Raises:
+        UserInputError: ``value`` is ``None`` (naming the setting and what to give).
+    """
+    if value is None:
+        raise UserInputError(f"{field_name}: give {what}")
+    return Path(value)

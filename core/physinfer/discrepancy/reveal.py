@@ -12,6 +12,7 @@ noise floor as here, so they are measured only for a chaotic phenomenon, and onl
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -65,31 +66,13 @@ def reveal_by_fixing(
     out: list[dict[str, Any]] = []
     if len(space) < 2:
         return out
-    now = effect_limit(
-        probe,
-        ladder,
-        theta,
-        base_emb,
-        jac,
-        threshold,
-        seeds,
-        effect_space=effect_space,
-        measure="none",
-    )
+    predicted = functools.partial(
+        effect_limit, probe, ladder, theta, base_emb, jac, threshold, seeds,
+        effect_space=effect_space, measure="none",
+    )  # fmt: skip
+    now = predicted()
     for d, name in enumerate(space.names):
-        keep = [i != d for i in range(len(space))]
-        fixed = effect_limit(
-            probe,
-            ladder,
-            theta,
-            base_emb,
-            jac,
-            threshold,
-            seeds,
-            effect_space=effect_space,
-            measure="none",
-            keep=keep,
-        )
+        fixed = predicted(keep=[i != d for i in range(len(space))])
         factor = _improvement(now, fixed)
         if factor is None or factor <= 1.05:
             continue
