@@ -79,6 +79,16 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
 
 
 @with_refinement_threads
+def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
+    """The trials of a refinement: ``steps`` when given; otherwise the phenomenon's default,
+    or its ``default_steps_with_posterior`` when the search starts from a posterior estimator."""
+    if steps is not None:
+        return steps
+    if from_posterior and phenomenon.default_steps_with_posterior is not None:
+        return int(phenomenon.default_steps_with_posterior)
+    return int(phenomenon.default_steps)
+
+
 def refine(
     registry: Registry,
     *,
@@ -165,19 +175,13 @@ def refine(
 
         check_model_scene(model_file, model, pipeline.phenomenon, scene)
     fixed_values = fixed_by_user(pipeline, fixed)
-    budget = steps if steps is not None else pipeline.phenomenon.default_steps
-    config = RefineConfig(
-        steps=budget,
-        optimizer=optimizer,
-        seed=seed,
-        noise_samples=noise_samples,
-        seeds_per_trial=seeds_per_trial,
-        floor_samples=floor_samples,
-        select_top=select_top,
-        select_seeds=select_seeds,
-        batch_size=batch_size,
-    )
-    config.validate()
+    settings = {
+        "optimizer": optimizer, "seed": seed, "noise_samples": noise_samples, "seeds_per_trial": seeds_per_trial,
+        "floor_samples": floor_samples, "select_top": select_top, "select_seeds": select_seeds,
+        "batch_size": batch_size,
+    }  # fmt: skip
+    # Checked before the target is read; the budget itself waits for the posterior (below).
+    RefineConfig(steps=steps if steps is not None else pipeline.phenomenon.default_steps, **settings).validate()
     with naming_effects(registry, plugin, effects, "--truth"):
         target = load_target(
             pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed,
@@ -191,6 +195,8 @@ def refine(
             registry, plugin=plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
             posterior=posterior, device=device, seed=seed, scene=scene,
         )  # fmt: skip
+    budget = default_budget(pipeline.phenomenon, steps, from_posterior=amortized is not None and model_file is None)
+    config = RefineConfig(steps=budget, **settings)
     if resume:
         stored = run_dir.load_run_info()
         if stored.get("target") not in (None, "default") and target_path is None:

@@ -475,6 +475,34 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
     assert not (tmp_path / "drag" / "trials.jsonl").exists()
 
 
+def test_a_search_from_a_posterior_takes_the_phenomenons_shorter_default_budget(
+    pendulum_estimator, tmp_path, monkeypatch
+):
+    """``default_steps_with_posterior``: the budget when --steps is not given and the search
+    starts from an estimator (16 for the flag); without an estimator the default stays."""
+    import dataclasses
+
+    from physinfer.plugins import load_registry
+    from physinfer.session import default_budget, refine
+
+    path, _ = pendulum_estimator
+    registry, _ = load_registry()
+    pendulum = registry.phenomenon("pendulum")
+    short = dataclasses.replace(pendulum, default_steps_with_posterior=3)
+    assert default_budget(short, None, from_posterior=True) == 3
+    assert default_budget(short, None, from_posterior=False) == pendulum.default_steps
+    assert default_budget(short, 5, from_posterior=True) == 5  # --steps wins
+    assert default_budget(pendulum, None, from_posterior=True) == pendulum.default_steps  # not declared
+    original = registry.phenomenon
+    monkeypatch.setattr(registry, "phenomenon", lambda name, *a, **k: short if name == "pendulum" else original(name, *a, **k))
+    common = {"plugin": "pendulum", "optimizer": "random", "noise_samples": 0, "floor_samples": 0, "progress": False}
+    refine(registry, posterior=path, out=tmp_path / "from_posterior", **common)
+    trials = (tmp_path / "from_posterior" / "trials.jsonl").read_text().splitlines()
+    assert len(trials) == 3 and json.loads((tmp_path / "from_posterior" / "run.json").read_text())["steps"] == 3
+    refine(registry, use_posterior=False, steps=4, out=tmp_path / "centre", **common)
+    assert len((tmp_path / "centre" / "trials.jsonl").read_text().splitlines()) == 4
+
+
 # ------------------------------------------------- the refined posterior (BOLFI-style)
 
 

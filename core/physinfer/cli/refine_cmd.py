@@ -44,7 +44,10 @@ def refine_cmd(
         list[str], typer.Option("--truth", help="Known true value NAME=VALUE, for error reporting.")
     ] = [],  # noqa: B006
     steps: Annotated[
-        int | None, typer.Option("--steps", help="Trials in all (default: the plugin's).")
+        int | None, typer.Option(
+            "--steps",
+            help="Trials in all (default: the plugin's; fewer when the search starts from a posterior estimator).",
+        )
     ] = None,
     optimizer: Annotated[
         str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")
