@@ -184,12 +184,15 @@ def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str, strength: 
 
 
 def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace,
-             strength: float | None = None, workers: int | None = 1, subdir: str = "diagnosis") -> dict[str, Any]:
+             strength: float | None = None, workers: int | None = 1, subdir: str = "diagnosis",
+             calibrate_all: bool | None = None) -> dict[str, Any]:
     """Make one target and diagnose it in ``<case>/<subdir>``; the row is also written to
     ``<subdir>``'s ``case.json`` (``case.json`` for the default ``diagnosis``).
 
     ``workers``: processes running the stages after the baseline (1: all in this one, as
-    the stored tables were made; the decisions do not depend on it)."""
+    the stored tables were made; the decisions do not depend on it). ``calibrate_all``:
+    refine every self-consistency run (``None``: ``--calibrate-all``); the decisions do not
+    depend on it either."""
     import functools
 
     from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
@@ -228,6 +231,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             select_top=args.select_top,
             select_seeds=args.select_seeds,
             calibration_runs=args.calibration_runs,
+            calibrate_all=args.calibrate_all if calibrate_all is None else calibrate_all,
             calibration_control=not args.no_calibration_control,
             videos=False,
             limits=not args.no_limits,
@@ -247,6 +251,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
         "gap_ratio": report["gap_ratio"],
         "noise_floor": report["noise_floor"],
         "null_scale": report["null_scale"],
+        "null_scale_range": report.get("null_scale_range"),
         "baseline_gap": report["baseline"]["gap"],
         "self_consistency_gap": report["self_consistency_gap"],
         "self_consistency_gaps": report["self_consistency_gaps"],
@@ -273,39 +278,54 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     return row
 
 
+#: ``--timing-modes``: name → (workers: "one" or "K" for --workers, refine every self-consistency run).
+TIMING_MODES = {
+    "w1-all": ("one", True),  # every stage in one process, as the stored tables were made
+    "all": ("K", True),  # the stages side by side on K workers (the code of 2026-11-24 morning)
+    "needed": ("K", False),  # side by side, only the self-consistency runs the decisions need
+}
+
+
 def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]) -> dict[str, Any]:
-    """Each case diagnosed twice from scratch: in one process ("before": the stages one
-    after another, as every stored table was made) and with ``--workers`` processes ("after");
-    wall time per diagnosis and per stage, and whether every decision is the same."""
+    """Each case diagnosed from scratch once per ``--timing-modes`` mode (the first is
+    "before", the last "after"); wall time per diagnosis and per stage, and whether every
+    decision (named effect, misspecified, each candidate's significance) is the same."""
     from physinfer.datasets.executors import default_workers
 
-    after = args.workers or default_workers()
+    k = args.workers or default_workers()
+    modes = args.timing_modes
     rows, same = [], 0
     for hidden, seed in all_cases:
-        pair = {}
-        for workers in (1, after):
-            stored = case_dir_of(args.plugin, hidden, seed, args.out) / f"case-timing-w{workers}.json"
+        runs = {}
+        for mode in modes:
+            where, every = TIMING_MODES[mode]
+            workers = 1 if where == "one" else k
+            # The directory names of the first version of this benchmark, so its runs are reused.
+            subdir = f"timing-w{workers}" + ("" if every else "-needed")
+            stored = case_dir_of(args.plugin, hidden, seed, args.out) / f"case-{subdir}.json"
             if args.timing_reuse and stored.is_file():  # a mode measured by an earlier invocation
-                pair[workers] = json.loads(stored.read_text())
+                runs[mode] = json.loads(stored.read_text())
                 continue
-            case = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=f"timing-w{workers}")
-            pair[workers] = case
-            print(json.dumps({"hidden": hidden, "seed": seed, "workers": workers, "named": case["named"],
-                              "misspecified": case["misspecified"], "wall_time_s": round(case["wall_time_s"], 1)}),
-                  file=sys.stderr, flush=True)
-        decision = [(pair[w]["named"], pair[w]["misspecified"]) for w in (1, after)]
-        same += decision[0] == decision[1]
-        rows.append({"hidden": hidden, "seed": seed, "named": pair[1]["named"], "misspecified": pair[1]["misspecified"],
-                     "same_decision": decision[0] == decision[1],
-                     **{f"wall_s_w{w}": pair[w]["wall_time_s"] for w in (1, after)},
-                     **{f"stages_s_w{w}": (pair[w]["timing"] or {}).get("stages_s") for w in (1, after)}})
+            runs[mode] = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=subdir, calibrate_all=every)
+            print(json.dumps({"hidden": hidden, "seed": seed, "mode": mode, "named": runs[mode]["named"],
+                              "misspecified": runs[mode]["misspecified"],
+                              "wall_time_s": round(runs[mode]["wall_time_s"], 1)}), file=sys.stderr, flush=True)
+        decisions = {(r["named"], r["misspecified"], tuple(c["significant"] for _, c in sorted(r["candidates"].items())))
+                     for r in runs.values()}  # fmt: skip
+        same += len(decisions) == 1
+        first = runs[modes[0]]
+        rows.append({"hidden": hidden, "seed": seed, "named": first["named"], "misspecified": first["misspecified"],
+                     "same_decision": len(decisions) == 1,
+                     **{f"wall_s_{m}": r["wall_time_s"] for m, r in runs.items()},
+                     **{f"stages_s_{m}": (r["timing"] or {}).get("stages_s") for m, r in runs.items()},
+                     **{f"null_scale_range_{m}": r.get("null_scale_range") for m, r in runs.items()}})
 
     def stats(key: str) -> dict[str, float]:
         values = [r[key] for r in rows]
         return {"median": statistics.median(values), "max": max(values)}
 
-    return {"workers_after": after, "cases": len(rows), "same_decisions": same,
-            "wall_s_before": stats("wall_s_w1"), "wall_s_after": stats(f"wall_s_w{after}"), "rows": rows}
+    return {"workers": k, "modes": modes, "cases": len(rows), "same_decisions": same,
+            **{f"wall_s_{m}": stats(f"wall_s_{m}") for m in modes}, "rows": rows}
 
 
 def calibration_variants(case_dir: Path, rule: dict[str, float]) -> dict[str, dict[str, Any]]:
@@ -555,7 +575,13 @@ def main() -> None:
     parser.add_argument("--timing", action="store_true",
                         help="diagnose each case twice, in one process and with --workers; wall times and "
                              "whether the decisions agree (exit 1 if any differs)")
-    parser.add_argument("--workers", type=int, default=None, help="with --timing: processes after (default: CPUs)")
+    parser.add_argument("--workers", type=int, default=None, help="with --timing: processes K (default: CPUs)")
+    parser.add_argument("--timing-modes", nargs="+", choices=sorted(TIMING_MODES), default=["all", "needed"],
+                        help="with --timing: the modes, before first (w1-all: one process, every self-consistency "
+                             "run; all: K workers, every run; needed: K workers, the runs the decisions need)")
+    parser.add_argument("--calibrate-all", action="store_true",
+                        help="refine every self-consistency run (the tables' self-gap columns), not only those "
+                             "that can change a decision")
     parser.add_argument("--timing-reuse", action="store_true",
                         help="with --timing: take a mode's row from an earlier invocation's case-timing-w<K>.json "
                              "(delete it, and its timing-w<K>/ directory, to measure that mode again)")

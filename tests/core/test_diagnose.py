@@ -332,12 +332,14 @@ def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
 def test_stages_on_workers_give_the_trials_and_decisions_of_one_process(tmp_path: Path):
     target = _pendulum_target(tmp_path, "quadratic_drag")
     # (Ax's trials were checked the same way by hand: a default pendulum diagnosis, 9 stages.)
-    kw = {"steps": 3, "optimizer": "random", "calibration_runs": 2, "limits": False}
+    kw = {"steps": 3, "optimizer": "random", "calibration_runs": 2}
     alone = _diagnose(tmp_path / "alone", target, workers=1, **kw)
     side_by_side = _diagnose(tmp_path / "workers", target, workers=2, **kw)
     assert side_by_side["timing"]["workers"] == 2 and alone["timing"]["workers"] == 1
-    stages = ["baseline", "calibration-0", "calibration-0-control", "calibration-1", "calibration-1-control",
-              "control", "effect-quadratic_drag"]  # fmt: skip
+    # The same stages ran (the self-consistency runs the decisions needed) with the same trials.
+    stages = sorted(p.name for p in (tmp_path / "alone" / "diag-quadratic_drag").iterdir() if p.is_dir())
+    assert stages == sorted(p.name for p in (tmp_path / "workers" / "diag-quadratic_drag").iterdir() if p.is_dir())
+    assert {"baseline", "calibration-0", "calibration-1", "control", "effect-quadratic_drag"} <= set(stages)
     assert set(side_by_side["timing"]["stages_s"]) >= {"baseline", "side_by_side", "calibration-0", "control"}
     for stage in stages:
         one, two = (RunDirectory(tmp_path / run / "diag-quadratic_drag" / stage).read_trials()
@@ -345,12 +347,17 @@ def test_stages_on_workers_give_the_trials_and_decisions_of_one_process(tmp_path
         assert [(t.params, t.distance) for t in one] == [(t.params, t.distance) for t in two], stage
     for key in ("misspecified", "named_effect", "gap_before", "gap_after", "null_scale", "self_consistency_gaps"):
         assert side_by_side[key] == alone[key], key
+    # The detection-limit ladders ran on the workers too (one job per effect), to the same limits.
+    assert "limits" in side_by_side["timing"]["stages_s"]
+    for key in ("detectable_from", "limit"):
+        assert [c[key] for c in side_by_side["candidates"]] == [c[key] for c in alone["candidates"]], key
+    assert side_by_side["limits"]["simulations"] == alone["limits"]["simulations"]
 
 
 def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     """A tiny budget: every output is written, the JSON has its keys, a re-run resumes."""
     target = _pendulum_target(tmp_path, "quadratic_drag")
-    report = _diagnose(tmp_path, target, steps=2, optimizer="random")
+    report = _diagnose(tmp_path, target, steps=2, optimizer="random", calibrate_all=True)
     for key in ("misspecified", "named_effect", "gap_before", "gap_after", "noise_floor", "candidates", "regions"):
         assert key in report
     (cand,) = report["candidates"]
@@ -365,11 +372,11 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     first = json.loads((out / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()[0])
     assert first["params"]["drag_quadratic"] == 0.0
     assert first["params"]["length"] == pytest.approx(report["baseline"]["best_params"]["length"])
-    again = _diagnose(tmp_path, target, steps=2, optimizer="random")
+    again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibrate_all=True)
     assert again["gap_before"] == report["gap_before"]
     model = read_model(out / "model.json")
     assert model.plugin == "pendulum"
-    # Three calibration runs by default, each a stage with its own control; the null scale
+    # Three calibration runs (all refined: calibrate_all), each a stage with its own control; the null scale
     # uses the largest of their gaps, and the test uses the best baseline fit's gap.
     gaps = report["self_consistency_gaps"]
     assert len(gaps) == 3 and report["self_consistency_gap"] == pytest.approx(max(gaps))

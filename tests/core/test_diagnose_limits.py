@@ -186,8 +186,11 @@ def _limits(
     seed=0,
     reveal=False,
     make_longer=None,
+    runner_for=None,
 ):
-    """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor."""
+    """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor.
+
+    ``runner_for``: ``inputs -> run_tasks`` (the effects' tasks run elsewhere)."""
     from physinfer.loop import Pipeline
 
     phenomenon, renderer = pendulum
@@ -204,7 +207,7 @@ def _limits(
         diagnosis_simulations=300, make_longer=make_longer,
     )  # fmt: skip
     config = LimitConfig(seeds=seeds, fractions=fractions, reveal=reveal)
-    return detection_limits(inputs, config)
+    return detection_limits(inputs, config, run_tasks=None if runner_for is None else runner_for(inputs))
 
 
 def _drag_limit(pendulum, jitter: float, n_frames: int, *, seeds=2, seed=0) -> float:
@@ -335,3 +338,36 @@ def test_an_effect_hidden_by_its_own_randomness_has_no_limit(pendulum):
     assert top["shift"] > hum["threshold"]  # above a deterministic effect's threshold ...
     assert top["threshold"] > top["shift"]  # ... not above its own
     assert top["floor"] > 4 * hum["rungs"][0]["floor"]  # its own noise grows with its strength
+
+
+def test_effect_tasks_run_elsewhere_give_the_limits_of_one_process(pendulum):
+    """The ladder's per-effect tasks (what ``diagnose`` sends to its workers) are plain data:
+    pickled, run with a fresh probe each, they give the limits and simulation count of the
+    ladder run here, effect by effect."""
+    import pickle
+
+    from pendulum_example.physics import QuadraticDrag
+
+    from physinfer.discrepancy.limits import effect_ladder
+    from physinfer.embedders import GridSpectrumEmbedder
+
+    effect_sims = [("quadratic_drag", _jittery(0.1, 20, [QuadraticDrag()])), ("hum", _jittery(0.1, 20, [Hum()]))]
+    args = (pendulum, _jittery(0.1, 20), effect_sims, GridSpectrumEmbedder(n_frames=20))
+    here = _limits(*args, fractions=(0.5, 1.0))
+
+    def runner_for(inputs):
+        def elsewhere(tasks):
+            results = []
+            for task in tasks:
+                task = pickle.loads(pickle.dumps(task))
+                probe = Probe(inputs.base, inputs.render_params)
+                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
+                results.append(pickle.loads(pickle.dumps((limit, ladder, probe.simulations))))
+            return results
+
+        return elsewhere
+
+    there = _limits(*args, fractions=(0.5, 1.0), runner_for=runner_for)
+    for name in ("quadratic_drag", "hum"):
+        assert there["effects"][name] == here["effects"][name], name
+    assert there["simulations"] == here["simulations"]

@@ -266,6 +266,7 @@ def diagnose(
         batch_size=o.batch_size,
         calibrate=o.calibrate,
         calibration_runs=o.calibration_runs,
+        calibrate_all=o.calibrate_all,
         calibration_control=o.calibration_control,
         rule=DecisionRule(
             misspecified_factor=o.threshold,

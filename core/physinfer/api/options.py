@@ -101,7 +101,8 @@ class SearchOptions:
     """How a refinement searches (shared by ``refine`` and ``diagnose``).
 
     Attributes:
-        steps: Trials in all (``None``: the phenomenon's default).
+        steps: Trials in all (``None``: the phenomenon's default, or its
+            ``default_steps_with_posterior`` when the search starts from a posterior estimator).
         optimizer: ``ax``, ``random``, ``cma`` or a plugin's.
         floor_samples: Re-simulations of the best fit for the noise floor.
         select_top: Re-simulate the best M trials under ``select_seeds`` fresh seeds and keep
@@ -177,6 +178,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         floor_samples: Re-simulations per gap measurement (at least 4).
         calibrate: Run the self-consistency refinements that calibrate the null scale.
         calibration_runs: How many.
+        calibrate_all: Refine every one of them; by default only those that could change a
+            decision (the same decisions, the null scale then possibly only a range).
         calibration_control: Give each its own control, as the baseline has.
         calibration_summary: ``max`` or ``median`` of their gaps.
         threshold: The gap test finds the model misspecified above this many null scales.
@@ -194,6 +197,7 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
     floor_samples: int = 6
     calibrate: bool = True
     calibration_runs: int = 3
+    calibrate_all: bool = False
     calibration_control: bool = True
     calibration_summary: str = "max"
     threshold: float = 2.0

@@ -75,6 +75,14 @@ def diagnose_cmd(
             "gaps one (default: the largest).",
         ),
     ] = 3,
+    calibrate_all: Annotated[
+        bool,
+        typer.Option(
+            "--calibrate-all",
+            help="Refine every self-consistency run and control. By default only those that could change a "
+            "decision are refined (the same decisions; the null scale may then be known only as a range).",
+        ),
+    ] = False,
     calibration_control: Annotated[
         bool,
         typer.Option(
@@ -146,6 +154,7 @@ def diagnose_cmd(
     from physinfer import api
     from physinfer.cli.app import options_from_cli
     from physinfer.discrepancy.limits import limit_line
+    from physinfer.discrepancy.needed_calibration import null_scale_words
 
     options = options_from_cli(api.DiagnoseOptions, given)
     diagnosis = api.diagnose(
@@ -160,7 +169,7 @@ def diagnose_cmd(
     err_console.print(
         f"[bold]misspecified[/] {report['misspecified']}{f' (by {because})' if because else ''}"
         f"   gap {report['gap_before']:.4g} → {report['gap_after']:.4g}"
-        f"   (noise floor {report['noise_floor']:.4g}, null scale {report['null_scale']:.4g},"
+        f"   (noise floor {report['noise_floor']:.4g}, {null_scale_words(report)},"
         f" gap-test threshold {report['threshold']:.4g})",
         highlight=False,
     )

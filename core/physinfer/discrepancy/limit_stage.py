@@ -19,6 +19,7 @@ from physinfer.roles import Target
 from physinfer.session import fixed_by_user
 
 if TYPE_CHECKING:
+    from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
@@ -27,15 +28,17 @@ Log = Callable[[str], None]
 def diagnosis_simulations(
     settings: DiagnoseSettings,
     results: Sequence[RefineResult],
-    calibration: Sequence[Mapping[str, Any]],
+    calibration_runs: int,
     n_gaps: int,
 ) -> int:
-    """Simulations a diagnosis costs: trials, selection re-simulations, gap measurements (the ladder's budget)."""
-    stages = len(results) + len(calibration) * (2 if settings.calibration_control else 1)
+    """Simulations a diagnosis costs with all its ``calibration_runs`` (the ladder's budget:
+    a share of this, whether or not the runs were needed; trials, selection re-simulations,
+    gap measurements)."""
+    stages = len(results) + calibration_runs * (2 if settings.calibration_control else 1)
     per_stage_trials = sum(r.n_trials for r in results) / max(len(results), 1)
     steps = settings.steps or per_stage_trials
     effect_steps = settings.effect_steps or steps
-    calibration_trials = len(calibration) * (
+    calibration_trials = calibration_runs * (
         steps + (effect_steps if settings.calibration_control else 0)
     )
     select = settings.select_top * settings.select_seeds * stages
@@ -57,8 +60,10 @@ def run_limits(
     scale: float,
     n_sims: int,
     say: Log,
+    pool: WorkerPool | None = None,
 ) -> dict[str, Any]:
-    """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``."""
+    """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``;
+    the effects' ladders side by side on ``pool`` when it has workers."""
     import dataclasses
     import json
 
@@ -122,6 +127,9 @@ def run_limits(
         diagnosis_simulations=n_sims,
         make_longer=make_longer,
     )
-    limits = detection_limits(inputs, settings.limit_config, log=say)
+    from physinfer.discrepancy.parallel import limit_runner
+
+    runner = limit_runner(pool, target.render_params, say)
+    limits = detection_limits(inputs, settings.limit_config, log=say, run_tasks=runner)
     atomic_write_json(path, {"key": key, "limits": limits})
     return json.loads(path.read_text())["limits"]  # as a resumed diagnosis reads it (NaN as null)

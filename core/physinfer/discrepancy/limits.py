@@ -172,10 +172,57 @@ def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -
     return n
 
 
+@dataclass(frozen=True)
+class EffectTask:
+    """One effect's share of the ladder — its rungs, limit and ``--fix`` what-ifs — as plain
+    data, so that a worker process can run it (:func:`effect_ladder`).
+
+    Attributes:
+        name: The effect.
+        theta: θ̂, complete.
+        base_embeddings: θ̂'s re-simulations' embeddings.
+        jac: The shared Jacobian at θ̂.
+        threshold: The rule's threshold for this effect.
+        fractions: The rungs.
+        seeds: Each rung's seeds.
+        refit_seeds: The baseline's seeds (Jacobian, refits).
+        deterministic: One clip per rung, every rung's refit measured.
+    """
+
+    name: str
+    theta: dict[str, float]
+    base_embeddings: np.ndarray
+    jac: np.ndarray
+    threshold: Threshold
+    fractions: tuple[float, ...]
+    seeds: tuple[int, ...]
+    refit_seeds: tuple[int, ...]
+    deterministic: bool
+
+
+def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[dict[str, Any], Ladder]:
+    """Run ``task`` with ``probe`` and the effect's ``augmented`` pipeline: its limit record and ladder."""
+    effect_space = augmented.effects[0].parameter_space
+    ladder = run_ladder(probe, augmented, task.theta, effect_space, task.fractions, task.seeds)
+    common = (probe, ladder, task.theta, task.base_embeddings, task.jac, task.threshold, list(task.refit_seeds))
+    limit = effect_limit(*common, effect_space=effect_space, measure="all" if task.deterministic else "key")
+    limit["threshold"] = task.threshold.at()
+    limit["reveal"] = reveal_by_fixing(*common, limit, effect_space)
+    return limit, ladder
+
+
+#: Runs effect tasks elsewhere (worker processes): returns, in order, each task's limit
+#: record, ladder and simulation count, or ``None`` for a task that failed there.
+TaskRunner = Callable[[list[EffectTask]], list[tuple[dict[str, Any], Ladder, int] | None]]
+
+
 def detection_limits(
-    inputs: LimitInputs, config: LimitConfig, *, log: Log | None = None
+    inputs: LimitInputs, config: LimitConfig, *, log: Log | None = None, run_tasks: TaskRunner | None = None
 ) -> dict[str, Any]:
     """Every candidate's detection limit at θ̂, and what would lower it.
+
+    ``run_tasks``: runs the effects' tasks side by side (the limits are the same: every
+    task's seeds are its own); ``None``: one after another here.
 
     Returns:
         ``effects`` (name → :func:`~physinfer.discrepancy.limit_rule.effect_limit`'s result with
@@ -197,30 +244,37 @@ def detection_limits(
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
     jac, jac_trajs = jacobian(probe, theta, base_emb, refit_seeds, config.step)
     seconds = next((t.vertices.shape[0] / t.fps for t in jac_trajs if t is not None), None)
-    effects: dict[str, Any] = {}
-    ladders: dict[str, Ladder] = {}
-    thresholds: dict[str, Threshold] = {}
-    for name, pipeline in inputs.augmented.items():
-        effect_space = pipeline.effects[0].parameter_space
-        thresholds[name] = Threshold.of(
-            inputs.scale,
-            len(effect_space),
-            inputs.rule,
-            len(inputs.augmented),
+    thresholds = {
+        name: Threshold.of(
+            inputs.scale, len(pipeline.effects[0].parameter_space), inputs.rule, len(inputs.augmented),
             inputs.floor_samples,
-        )
-        ladders[name] = run_ladder(probe, pipeline, theta, effect_space, config.fractions, seeds)
-        limit = effect_limit(
-            probe, ladders[name], theta, base_emb, jac, thresholds[name], refit_seeds,
-            effect_space=effect_space, measure="all" if deterministic else "key",
         )  # fmt: skip
-        limit["threshold"] = thresholds[name].at()
-        limit["reveal"] = reveal_by_fixing(
-            probe, ladders[name], theta, base_emb, jac, thresholds[name], refit_seeds, limit,
-            effect_space,
-        )  # fmt: skip
-        effects[name] = limit
-        say(f"      {name}: " + summary_phrase(limit))
+        for name, pipeline in inputs.augmented.items()
+    }
+    tasks = [
+        EffectTask(name, theta, base_emb, jac, thresholds[name], tuple(config.fractions), tuple(seeds),
+                   tuple(refit_seeds), deterministic)  # fmt: skip
+        for name in inputs.augmented
+    ]
+    if run_tasks is None:
+        results = []
+        for task in tasks:
+            before = probe.simulations
+            limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
+            results.append((limit, ladder, probe.simulations - before))
+            say(f"      {task.name}: " + summary_phrase(limit))
+    else:
+        results = run_tasks(tasks)
+        for i, task in enumerate(tasks):
+            if results[i] is None:  # failed where it ran: here instead
+                before = probe.simulations
+                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
+                results[i] = (limit, ladder, probe.simulations - before)
+            else:
+                probe.simulations += results[i][2]
+            say(f"      {task.name}: " + summary_phrase(results[i][0]))
+    effects = {task.name: limit for task, (limit, _, _) in zip(tasks, results, strict=True)}
+    ladders = {task.name: ladder for task, (_, ladder, _) in zip(tasks, results, strict=True)}
     if config.reveal and not deterministic:
         reveal_by_setting(
             probe, inputs, config.step, thresholds, effects, ladders, theta, refit_seeds,

@@ -1,8 +1,9 @@
 """Run a diagnosis' independent stages side by side on worker processes (or a Dask cluster).
 
-After the baseline, a diagnosis refines ``R`` self-consistency runs (each followed by its
-control), the control, and one augmented model per effect. None needs another's result:
-all start from the baseline's fit. :func:`prefetch_stages` sends them as jobs to
+After the baseline, a diagnosis refines the control, one augmented model per effect and the
+self-consistency runs it needs (each followed by its control; see
+:mod:`physinfer.discrepancy.needed_calibration`). None needs another's result: all start
+from the baseline's fit. :func:`prefetch_stages` sends them as jobs to
 :func:`physinfer.datasets.open_executor` — ``workers`` local processes, or the workers of a
 Dask scheduler — where :func:`run_job` runs the same stage functions
 (:mod:`physinfer.discrepancy.stages`) the workflow runs, into the same directories. The
@@ -12,6 +13,12 @@ simulations are seeded by the stage alone).
 
 A job that fails on a worker is only reported: the workflow runs that stage itself and
 meets the failure (or not) where it would have without workers.
+
+The detection limits' ladders run the same way, one job per effect (:func:`limit_runner`):
+each effect's rungs and refits have their own seeds, so the limits do not depend on where
+they ran. One :class:`WorkerPool` serves every round of a diagnosis (the stages, the
+self-consistency runs the decisions ask for, the ladders): its processes start once and keep
+the models they built.
 
 Workers build the plugins from their entry points (:func:`physinfer.plugins.load_registry`),
 or with the settings' ``registry_factory`` when one is given: a registry assembled in code
@@ -24,13 +31,14 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, wait
-from contextlib import contextmanager
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.stages import (
     GapContext,
@@ -45,6 +53,7 @@ from physinfer.progress import StageProgress
 from physinfer.roles import Target
 
 if TYPE_CHECKING:
+    from physinfer.discrepancy.limits import EffectTask, TaskRunner
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
@@ -71,6 +80,8 @@ class StageJob:
         steps: The baseline's budget (a calibration run's).
         effect_steps: The control's and each model's budget.
         target_label: Stored in each stage's ``run.json``.
+        with_control: A calibration job refines the run's control too (when the settings
+            give runs controls); ``False``: the run's own stage only.
     """
 
     kind: str
@@ -83,12 +94,13 @@ class StageJob:
     steps: int
     effect_steps: int
     target_label: str
+    with_control: bool = True
 
     @property
     def stages(self) -> list[tuple[str, int]]:
         """``(directory, trials)`` of each stage the job writes, in order."""
         if self.kind == "calibration":
-            names = calibration_stage_names(int(self.key), self.settings)
+            names = calibration_stage_names(int(self.key), self.settings)[: None if self.with_control else 1]
             return [
                 (name, self.steps if i == 0 else self.effect_steps) for i, name in enumerate(names)
             ]
@@ -106,18 +118,26 @@ def stage_jobs(
     steps: int,
     effect_steps: int,
     target_label: str,
+    calibration: Sequence[tuple[int, bool]] | None = None,
+    control_and_effects: bool = True,
 ) -> list[StageJob]:
-    """Every job after the baseline, the longest first (a calibration run and its control
-    take two stages' time), so the last to finish is a short one."""
+    """The jobs after the baseline, the longest first (a calibration run and its control
+    take two stages' time), so the last to finish is a short one.
+
+    ``calibration``: ``(run, with_control)`` of the self-consistency jobs (``None``: every
+    run with its control, as ``settings`` asks); ``control_and_effects``: also the control
+    and one job per effect."""
     common = {
         "settings": settings, "baseline_best": dict(baseline_best), "target": target,
         "target_embedding": np.asarray(target_embedding), "seeds": tuple(int(s) for s in seeds),
         "steps": steps, "effect_steps": effect_steps, "target_label": target_label,
     }  # fmt: skip
-    calibration = range(settings.calibration_runs) if settings.calibrate else range(0)
-    jobs = [StageJob("calibration", r, **common) for r in calibration]
-    jobs.append(StageJob("control", "", **common))
-    jobs += [StageJob("effect", name, **common) for name in effects]
+    if calibration is None:
+        calibration = [(r, True) for r in range(settings.calibration_runs)] if settings.calibrate else []
+    jobs = [StageJob("calibration", r, **common, with_control=control) for r, control in calibration]
+    if control_and_effects:
+        jobs.append(StageJob("control", "", **common))
+        jobs += [StageJob("effect", name, **common) for name in effects]
     return sorted(jobs, key=lambda job: -sum(trials for _, trials in job.stages))
 
 
@@ -133,7 +153,7 @@ def run_job(job: StageJob) -> dict[str, float]:
         if job.kind == "calibration":
             calibration_run(
                 int(job.key), base, job.baseline_best, job.target, steps=job.steps, effect_steps=job.effect_steps,
-                seeds=job.seeds, **common,
+                seeds=job.seeds, with_control=job.with_control, **common,
             )  # fmt: skip
         elif job.kind == "control":
             control_stage(base, job.target, job.baseline_best, gaps, effect_steps=job.effect_steps,
@@ -212,68 +232,101 @@ def usable_workers(
     return workers, None
 
 
+class WorkerPool:
+    """The worker processes of one diagnosis, started at their first job and kept until it
+    ends, so each round of jobs (the stages after the baseline, the self-consistency runs
+    asked for later, the detection limits' ladders) does not pay again for the processes'
+    start: the imports and each worker's model (:func:`_worker_pipeline` keeps it).
+
+    Args:
+        settings: The diagnosis settings (``workers``, ``scheduler``).
+        effects: The candidate effects (workers must be able to build them).
+        most_jobs: The most jobs any round sends: more workers than that would idle.
+        say: Where a reason for one process is said.
+    """
+
+    def __init__(self, settings: DiagnoseSettings, effects: Sequence[str], most_jobs: int, say: Log) -> None:
+        self.settings = settings
+        self.size, why_not = usable_workers(settings, most_jobs, effects) if most_jobs else (1, None)
+        if why_not:
+            say(f"      {why_not}")
+        self.why_one_process = why_not
+        self._stack = ExitStack()
+        self._executor: Executor | None = None
+
+    def executor(self) -> Executor:
+        """The pool's executor, started on the first call."""
+        if self._executor is None:
+            from physinfer.datasets.executors import open_executor
+
+            self._executor, _ = self._stack.enter_context(
+                open_executor(workers=self.size, scheduler=self.settings.scheduler, threads_per_worker=1)
+            )
+        return self._executor
+
+    def where(self) -> str:
+        if self.settings.scheduler:
+            return f"the Dask cluster at {self.settings.scheduler}"
+        return f"{self.size} worker processes"
+
+    def close(self) -> None:
+        self._stack.close()
+        self._executor = None
+
+    def __enter__(self) -> WorkerPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def prefetch_stages(
     jobs: Sequence[StageJob],
-    workers: int,
+    executor: Executor,
     *,
-    scheduler: str | None,
     on_progress: Callable[[str, int, int], None],
     say: Callable[[str], None],
 ) -> dict[str, float]:
-    """Run ``jobs`` on ``workers`` processes (or on ``scheduler``'s workers); the seconds
-    each job's first stage took. Progress comes from counting each stage's logged trials.
-    A failed job is said and left for the workflow to run again."""
-    from physinfer.datasets.executors import open_executor
-
+    """Run ``jobs`` on ``executor`` (a :class:`WorkerPool`'s); the seconds each job's first
+    stage took. Progress comes from counting each stage's logged trials. A failed job is
+    said and left for the workflow to run again."""
     seconds: dict[str, float] = {}
-    with open_executor(workers=workers, scheduler=scheduler, threads_per_worker=1) as (
-        executor,
-        _info,
-    ):
-        futures: dict[Future, StageJob] = {executor.submit(run_job, job): job for job in jobs}
-        pending = set(futures)
-        with _watching(
-            [stage for job in jobs for stage in job.stages], jobs[0].settings.out, on_progress
-        ):
-            while pending:
-                done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
-                for future in done:
-                    job = futures[future]
-                    try:
-                        seconds.update(future.result())
-                    except Exception as exc:  # noqa: BLE001 - the workflow runs the stage again here
-                        say(f"      {job.stages[0][0]} failed on a worker ({type(exc).__name__}: {exc}); "
-                            "running it here")  # fmt: skip
+    futures: dict[Future, StageJob] = {executor.submit(run_job, job): job for job in jobs}
+    pending = set(futures)
+    with _watching([stage for job in jobs for stage in job.stages], jobs[0].settings.out, on_progress):
+        while pending:
+            done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
+            for future in done:
+                job = futures[future]
+                try:
+                    seconds.update(future.result())
+                except Exception as exc:  # noqa: BLE001 - the workflow runs the stage again here
+                    say(f"      {job.stages[0][0]} failed on a worker ({type(exc).__name__}: {exc}); "
+                        "running it here")  # fmt: skip
     return seconds
 
 
 def run_on_workers(
-    settings: DiagnoseSettings,
+    pool: WorkerPool,
     jobs: Sequence[StageJob],
-    effects: Sequence[str],
     bars: StageProgress,
     clock: StageClock,
     say: Log,
+    label: str = "side_by_side",
 ) -> dict[str, Any]:
-    """Run ``jobs`` (:func:`stage_jobs`) on workers when more than one is usable; how they ran."""
-    workers, why_not = usable_workers(settings, len(jobs), effects)
-    if why_not:
-        say(f"      {why_not}")
-    if workers < 2:
-        return {"workers": 1, "scheduler": None, **({"why_one_process": why_not} if why_not else {})}
-    where = (
-        f"the Dask cluster at {settings.scheduler}"
-        if settings.scheduler
-        else f"{workers} worker processes"
-    )
-    say(f"      the {len(jobs)} stages after the baseline run side by side on {where}")
-    with clock.stage("side_by_side"):
-        clock.add(
-            prefetch_stages(
-                jobs, workers, scheduler=settings.scheduler, on_progress=bars.update, say=say
-            )
-        )
-    return {"workers": workers, "scheduler": settings.scheduler}
+    """Run ``jobs`` (:func:`stage_jobs`) on the pool when it has more than one worker; how
+    they ran. ``label``: the clock's name for the wall time of the jobs together (rounds
+    under one label add up)."""
+    how: dict[str, Any] = {"workers": pool.size if pool.size > 1 else 1, "scheduler": pool.settings.scheduler}
+    if pool.size < 2:
+        how["scheduler"] = None
+        return {**how, **({"why_one_process": pool.why_one_process} if pool.why_one_process else {})}
+    if not jobs:
+        return how
+    say(f"      {len(jobs)} jobs run side by side on {pool.where()}")
+    with clock.stage(label, add=True):
+        clock.add(prefetch_stages(jobs, pool.executor(), on_progress=bars.update, say=say))
+    return how
 
 
 @contextmanager
@@ -307,3 +360,57 @@ def _logged_trials(path: Any) -> int:
             return sum(1 for _ in fh)
     except OSError:
         return 0
+
+
+@dataclass(frozen=True)
+class LimitJob:
+    """One effect's detection-limit ladder (:class:`~physinfer.discrepancy.limits.EffectTask`)
+    for a worker, with what it needs to rebuild the models."""
+
+    settings: DiagnoseSettings
+    render_params: Mapping[str, Any]
+    task: EffectTask
+    keep_trajectories: bool
+
+
+def run_limit_job(job: LimitJob) -> tuple[dict[str, Any], Any, int]:
+    """Run one effect's ladder in this (worker) process: its limit, ladder and simulations."""
+    from physinfer.discrepancy.ladder import Probe
+    from physinfer.discrepancy.limits import effect_ladder
+    from physinfer.session import fixed_by_user
+    from physinfer.threads import refinement_torch_threads, torch_threads
+
+    registry, base = _worker_pipeline(job.settings)
+    effect = registry.effect(job.task.name, phenomenon=base.phenomenon.name)
+    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
+    probe = Probe(base, job.render_params)
+    with torch_threads(refinement_torch_threads()):
+        limit, ladder = effect_ladder(probe, augmented, job.task)
+    if not job.keep_trajectories:  # only another view's what-if re-renders them: not worth the transfer
+        ladder.trajectories = []
+    return limit, ladder, probe.simulations
+
+
+def limit_runner(pool: WorkerPool | None, render_params: Mapping[str, Any], say: Log) -> TaskRunner | None:
+    """Run the effects' ladders side by side on the pool (``None``: it has one worker or fewer).
+
+    A task that fails on a worker comes back as ``None`` and is run in this process."""
+    if pool is None or pool.size < 2:
+        return None
+    settings = pool.settings
+
+    def run(tasks: list[EffectTask]) -> list[Any]:
+        say(f"      the {len(tasks)} effects' ladders run side by side on {pool.where()}")
+        keep = settings.limit_config.reveal
+        executor = pool.executor()
+        futures = [executor.submit(run_limit_job, LimitJob(settings, dict(render_params), t, keep)) for t in tasks]
+        results = []
+        for task, future in zip(tasks, futures, strict=True):
+            try:
+                results.append(future.result())
+            except Exception as exc:  # noqa: BLE001 - run here instead, where it fails (or not) as it would alone
+                say(f"      {task.name}'s ladder failed on a worker ({type(exc).__name__}: {exc}); running it here")
+                results.append(None)
+        return results
+
+    return run

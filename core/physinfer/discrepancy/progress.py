@@ -18,12 +18,19 @@ class StageClock:
         self.seconds: dict[str, float] = {}
 
     @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
-        """Time the block as ``name``; a stage a worker already timed keeps its time."""
+    def stage(self, name: str, *, add: bool = False) -> Iterator[None]:
+        """Time the block as ``name``; a stage a worker already timed keeps its time (the
+        block only read it back), unless ``add``: the block's time adds to the name's (a
+        later round of the same stage or label)."""
         start = time.perf_counter()
         yield
-        self.seconds.setdefault(name, time.perf_counter() - start)
+        elapsed = time.perf_counter() - start
+        if add:
+            self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
+        else:
+            self.seconds.setdefault(name, elapsed)
 
     def add(self, seconds: dict[str, float]) -> None:
-        """Times measured elsewhere (on workers)."""
-        self.seconds.update(seconds)
+        """Times measured elsewhere (on workers), added to what each name has."""
+        for name, value in seconds.items():
+            self.seconds[name] = self.seconds.get(name, 0.0) + value

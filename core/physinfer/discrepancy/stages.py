@@ -257,11 +257,18 @@ def calibration_run(
     effect_steps: int,
     seeds: Sequence[int],
     on_trial: OnTrial | None = None,
+    with_control: bool = True,
 ) -> dict[str, Any]:
     """Self-consistency run ``run`` (and its control): refine the baseline against a target
-    it made itself at ``params``; the run's gap record (see :func:`run_calibration`)."""
+    it made itself at ``params``; the run's gap record (see :func:`run_calibration`).
+
+    ``with_control=False`` refines the run's own stage only (its control, if the settings
+    ask for one, is left for a later call: ``gap_control`` is then ``None`` and ``gap`` the
+    run's own, an upper bound; see :mod:`physinfer.discrepancy.needed_calibration`)."""
     target_seed, optimizer_seed = calibration_seeds(settings.seed, settings.calibration_runs)[run]
     name, *control_name = calibration_stage_names(run, settings)
+    if not with_control:
+        control_name = []
     encode_dir = settings.out / name if settings.target_path is not None else None
     cal_target = calibration_target(base, params, target, target_seed, encode_dir)
     cal = run_stage(
@@ -278,6 +285,7 @@ def calibration_run(
         )  # fmt: skip
         gap_control = float(gaps.measure(base, control.best_params, control_name[0]).gap)
     return {
+        "run": run,
         "gap": gap if gap_control is None else min(gap, gap_control),
         "gap_run": gap,
         "gap_control": gap_control,

@@ -3,14 +3,19 @@
 Stages, each a resumable refinement in its own run directory under ``--out``::
 
     baseline/            the baseline model refined from the centre (``steps`` trials)
+    control/             the baseline refined ``effect_steps`` more trials from its best θ
+    effect-<name>/       the baseline with <name> switched in, the same budget and warm start
     calibration-<r>/     r = 0 … R−1: the baseline refined against a synthetic target made
                          at its own best θ (self-consistency), each run with its own target
                          seed and optimizer seed (skipped with ``calibrate=False``); a
                          ``calibration/`` left by an older version is renamed ``calibration-0/``
     calibration-<r>-control/  with ``calibration_control``: run r refined ``effect_steps``
                          more trials from its best θ, as ``control/`` continues the baseline
-    control/             the baseline refined ``effect_steps`` more trials from its best θ
-    effect-<name>/       the baseline with <name> switched in, the same budget and warm start
+
+The self-consistency runs come last and only as far as a decision depends on them
+(:mod:`physinfer.discrepancy.needed_calibration`; all of them with ``calibrate_all``): the
+decisions are monotone in the null scale, and where they are the same over the range of
+scales the unrefined runs allow, those runs are skipped.
     limits.json          each candidate's detection limit at the best baseline fit
                          (:mod:`physinfer.discrepancy.limits`; skipped with ``limits=False``)
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
@@ -25,6 +30,7 @@ and the pass through the stages below reads them back from disk.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -32,20 +38,25 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.conditioning import Conditioning
+from physinfer.discrepancy.calibration_stage import (
+    calibrate,
+    first_calibration_jobs,
+    limit_scale,
+    scale_text,
+)
 from physinfer.discrepancy.decide import (
     DecisionRule,
     effect_significance,
     final_verdict,
     misspecification,
     name_effect,
-    null_scale,
     self_consistency_gap,
 )
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.limits import LimitConfig
 from physinfer.discrepancy.localise import LocaliseConfig
 from physinfer.discrepancy.outputs import write_outputs
-from physinfer.discrepancy.parallel import run_on_workers, scene_registry, stage_jobs
+from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
     GapContext,
@@ -53,7 +64,6 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
     ablated_stage,
     adopt_single_calibration,
     build_base,
-    calibration_run,
     calibration_seeds,
     control_stage,
     effect_stage,
@@ -109,6 +119,10 @@ class DiagnoseSettings:
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
             (the maximum by default) makes their gaps one (see :mod:`physinfer.discrepancy.decide`).
+        calibrate_all: Refine every self-consistency run and control. By default only the
+            runs that can change a decision are refined
+            (:mod:`physinfer.discrepancy.needed_calibration`): the decisions are the same,
+            the null scale may then be known only as a range.
         calibration_control: Follow each calibration run with its own control
             (``effect_steps`` trials warm-started from its best θ), so that a self-consistency
             gap has the budget of the best baseline fit it is compared with; the
@@ -161,6 +175,7 @@ class DiagnoseSettings:
     batch_size: int = 1
     calibrate: bool = True
     calibration_runs: int = 3
+    calibrate_all: bool = False
     calibration_control: bool = True
     rule: DecisionRule = field(default_factory=DecisionRule)
     localise: LocaliseConfig = field(default_factory=LocaliseConfig)
@@ -277,8 +292,12 @@ def _diagnose(
     say: Log,
 ) -> dict[str, Any]:
     """The stages and the decision of :func:`run_diagnosis`, with ``--out`` locked; returns the report."""
-    with StageProgress(settings.progress) as bars:
-        return _diagnose_stages(registry, settings, base, target, effect_objs, say, bars)
+    runs = settings.calibration_runs if settings.calibrate else 0
+    with (
+        StageProgress(settings.progress) as bars,
+        WorkerPool(settings, list(effect_objs), 1 + len(effect_objs) + runs, say) as pool,
+    ):
+        return _diagnose_stages(registry, settings, base, target, effect_objs, say, bars, pool)
 
 
 def _diagnose_stages(
@@ -289,6 +308,7 @@ def _diagnose_stages(
     effect_objs: Mapping[str, Any],
     say: Log,
     bars: StageProgress,
+    pool: WorkerPool,
 ) -> dict[str, Any]:
     steps = settings.steps or base.phenomenon.default_steps
     effect_steps = settings.effect_steps or steps
@@ -298,6 +318,7 @@ def _diagnose_stages(
     gaps = GapContext(target, target_embedding, tuple(seeds), settings.out)
     common = {"registry": registry, "settings": settings, "on_trial": bars.update}
     clock = StageClock()
+    effects = list(effect_objs)
 
     # 1. The baseline.
     say(f"[1/6] refining the baseline ({steps} trials)")
@@ -308,42 +329,22 @@ def _diagnose_stages(
     # The stages below start from the baseline's fit and not from each other: side by side
     # on workers first, if there are any; the pass below then reads them from disk.
     adopt_single_calibration(settings.out)
-    jobs = stage_jobs(
-        settings, list(effect_objs), baseline_best=baseline.best_params, target=target,
-        target_embedding=target_embedding, seeds=seeds, steps=steps, effect_steps=effect_steps,
-        target_label=target_label,
-    )  # fmt: skip
-    workers = run_on_workers(settings, jobs, list(effect_objs), bars, clock, say)
+    job_args = {
+        "baseline_best": baseline.best_params, "target": target, "target_embedding": target_embedding,
+        "seeds": seeds, "steps": steps, "effect_steps": effect_steps, "target_label": target_label,
+    }  # fmt: skip
+    jobs = stage_jobs(settings, effects, **job_args, calibration=first_calibration_jobs(settings, effects, pool.size))
+    workers = run_on_workers(pool, jobs, bars, clock, say)
 
-    # 2. The self-consistency runs (the null scale's optimizer part).
-    calibration: list[dict[str, Any]] = []
-    if settings.calibrate:
-        per_run = f"{steps} + {effect_steps}" if settings.calibration_control else f"{steps}"
-        say(
-            f"[2/6] self-consistency: refining the baseline against its own fit "
-            f"({settings.calibration_runs} × {per_run} trials)"
-        )
-        for r in range(settings.calibration_runs):
-            with clock.stage(f"calibration-{r}"):
-                calibration.append(
-                    calibration_run(
-                        r, base, baseline.best_params, target, steps=steps, effect_steps=effect_steps, seeds=seeds,
-                        **common,
-                    )  # fmt: skip
-                )
-    self_gaps = [run["gap"] for run in calibration]
-    self_gap = self_consistency_gap(self_gaps, settings.rule.calibration_summary)
-    scale = null_scale(gap0.floor, gap0.floor_q95, self_gap)
-
-    # 4. Equal-budget control and one augmented model per effect, all warm-started.
-    say(f"[3/6] control: the baseline refined {effect_steps} more trials from its fit")
+    # 2. Equal-budget control and one augmented model per effect, all warm-started.
+    say(f"[2/6] control: the baseline refined {effect_steps} more trials from its fit")
     with clock.stage("control"):
         stages = [
             control_stage(base, target, baseline.best_params, gaps, effect_steps=effect_steps,
                           target_label=target_label, **common)  # fmt: skip
         ]
     for name, effect in effect_objs.items():
-        say(f"[4/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
+        say(f"[3/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
         with clock.stage(f"effect-{name}"):
             stages.append(
                 effect_stage(
@@ -357,16 +358,68 @@ def _diagnose_stages(
     # fit found by any stage is what an effect must beat (ablation).
     ablated = [ablated_stage(stage, base, gaps) for stage in stages[1:]]
     before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
-    gap_before = float(before.gap.gap)
     # The misspecification test compares like with like: with calibration controls the
     # self-consistency gaps had the budget of the best baseline fit, without them the
     # baseline stage's.
-    tested = gap_before if settings.calibrate and settings.calibration_control else float(gap0.gap)
-    gap_verdict = misspecification(tested, scale, settings.rule)
-    say(
-        f"      gap {tested:.4g}, noise floor {gap0.floor:.4g}, null scale {scale:.4g} → "
-        + ("misspecified" if gap_verdict["misspecified"] else "within what a correct model leaves")
+    tested = float(before.gap.gap) if settings.calibrate and settings.calibration_control else float(gap0.gap)
+
+    def judged(scale: float) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
+        return _judge(stages, before, tested, scale, settings.rule, effect_objs)
+
+    # 4. The self-consistency runs (the null scale's optimizer part), as many as decide.
+    calibration, scale, scale_range = calibrate(
+        settings, base, baseline.best_params, target, gap0, judged, job_args, effects, common, bars, clock, say, pool
     )
+    candidates, verdict, named = judged(scale)
+    # The runs' summary only when every run was refined (otherwise the range says what is known).
+    every_run = all("skipped" not in run for run in calibration)
+    self_gap = self_consistency_gap([run["gap"] for run in calibration], settings.rule.calibration_summary) if (
+        calibration and every_run) else None  # fmt: skip
+    say(
+        f"      gap {tested:.4g}, noise floor {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
+        + ("misspecified" if verdict["gap_test"] else "within what a correct model leaves")
+    )
+    if verdict["evidence"] == ["effect"]:
+        say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
+    after = next((s for s in stages if s.label == named), before)
+    say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
+    limits = None
+    if settings.limits:
+        runs = settings.calibration_runs if settings.calibrate else 0
+        n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], runs,
+                                        n_gaps=2 + runs * (2 if settings.calibration_control else 1)
+                                        + 2 * len(effect_objs))  # fmt: skip
+        with clock.stage("limits"):
+            limits = run_limits(registry, settings, base, target, before, effect_objs,
+                                limit_scale(scale_range, gap0.floor_q95), n_sims, say, pool)  # fmt: skip
+        for cand in candidates:
+            lim = limits["effects"][cand["effect"]]
+            cand["detectable_from"] = lim["detectable_from"]
+            cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+    say("[6/6] localising and writing outputs")
+
+    with clock.stage("outputs"):
+        report = write_outputs(
+            settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
+            baseline,
+        )
+    report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
+    report["limits"] = None if limits is None else {k: v for k, v in limits.items() if k != "effects"}
+    report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
+    base.renderer.close()
+    return report
+
+
+def _judge(
+    stages: list[Stage],
+    before: Stage,
+    tested: float,
+    scale: float,
+    rule: DecisionRule,
+    effect_objs: Mapping[str, Any],
+) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
+    """Every decision at null scale ``scale``: the candidates' records, the verdict, the named effect."""
+    gap_before = float(before.gap.gap)
     candidates = []
     for stage in stages[1:]:
         decision = effect_significance(
@@ -376,7 +429,7 @@ def _diagnose_stages(
             gap_before=gap_before,
             n_params=stage.n_params,
             scale=scale,
-            rule=settings.rule,
+            rule=rule,
         )
         candidates.append(
             {
@@ -393,31 +446,5 @@ def _diagnose_stages(
                 "run_dir": stage.result.run_dir,
             }
         )
-    verdict = final_verdict(gap_verdict, candidates, settings.rule)
-    if verdict["evidence"] == ["effect"]:
-        say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
-    named = name_effect(candidates, verdict["misspecified"])
-    after = next((s for s in stages if s.label == named), before)
-    say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
-    limits = None
-    if settings.limits:
-        n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], calibration,
-                                        n_gaps=2 + len(calibration) * (2 if settings.calibration_control else 1)
-                                        + 2 * len(effect_objs))
-        with clock.stage("limits"):
-            limits = run_limits(registry, settings, base, target, before, effect_objs, scale, n_sims, say)
-        for cand in candidates:
-            lim = limits["effects"][cand["effect"]]
-            cand["detectable_from"] = lim["detectable_from"]
-            cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
-    say("[6/6] localising and writing outputs")
-
-    with clock.stage("outputs"):
-        report = write_outputs(
-            settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
-            baseline,
-        )
-    report["limits"] = None if limits is None else {k: v for k, v in limits.items() if k != "effects"}
-    report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
-    base.renderer.close()
-    return report
+    verdict = final_verdict(misspecification(tested, scale, rule), candidates, rule)
+    return candidates, verdict, name_effect(candidates, verdict["misspecified"])

@@ -11,6 +11,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from physinfer.discrepancy.needed_calibration import null_scale_words
 from physinfer.report.common import Content, parameter_table, read_json, units_of
 from physinfer.report.markup import (
     figure,
@@ -77,7 +78,7 @@ def verdict(report: Mapping[str, Any]) -> str:
         cls = "verdict good"
     lines.append(
         f"gap {fmt(report.get('gap_before'))} → {fmt(report.get('gap_after'))} "
-        f"(noise floor {fmt(report.get('noise_floor'))}, null scale {fmt(report.get('null_scale'))}, "
+        f"(noise floor {fmt(report.get('noise_floor'))}, {null_scale_words(report)}, "
         f"gap-test threshold {fmt(report.get('threshold'))})"
     )
     if report.get("misspecified_by"):

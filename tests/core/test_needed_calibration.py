@@ -1,0 +1,114 @@
+"""Only the self-consistency runs that can change a decision are refined
+(physinfer.discrepancy.needed_calibration), and the decisions are those of refining them all."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.discrepancy.decide import null_scale, self_consistency_gap
+from physinfer.discrepancy.needed_calibration import CalibrationRun, next_to_refine, scale_bounds
+
+
+def _signature(breakpoints):
+    """Decisions that flip, one by one, as the null scale passes each breakpoint (monotone)."""
+    return lambda scale: tuple(scale < b for b in breakpoints)
+
+
+def _settle(a, b, floor, q95, breakpoints, summary="max"):
+    """Run the procedure against known gaps: ``a[r]`` the run's own, ``b[r]`` its control's."""
+    runs = [CalibrationRun(r) for r in range(len(a))]
+    signature = _signature(breakpoints)
+    refined = []
+    while True:
+        todo, with_control = next_to_refine(runs, floor, q95, summary, signature)
+        if not todo:
+            break
+        for r in todo:
+            runs[r].update({"gap_run": a[r], "gap_control": b[r] if with_control else None}, final=with_control)
+            refined.append((r, with_control))
+    lo, hi = scale_bounds(runs, floor, q95, summary)
+    true_scale = null_scale(floor, q95, self_consistency_gap([min(x, y) for x, y in zip(a, b, strict=True)], summary))
+    return runs, refined, (lo, hi), signature(lo) == signature(true_scale)
+
+
+@pytest.mark.parametrize("summary", ["max", "median"])
+def test_the_decisions_are_those_of_every_run_refined(summary):
+    rng = np.random.default_rng(0)
+    for _ in range(400):
+        n = int(rng.integers(1, 5))
+        a = rng.uniform(0, 10, n)
+        b = a * rng.uniform(0.1, 1.2, n)  # a control may end worse than its run: the gap is the smaller
+        floor = float(rng.uniform(0, 5))
+        breakpoints = sorted(rng.uniform(0, 12, int(rng.integers(0, 4))))
+        runs, _, (lo, hi), same = _settle(a, b, floor, floor * 1.5, breakpoints, summary)
+        assert same, (a, b, floor, breakpoints)
+        assert lo <= hi
+
+
+def test_nothing_is_refined_when_no_scale_above_the_floor_changes_a_decision():
+    # Every decision flips below the floor (e.g. a clean target: "nothing" at any scale).
+    runs, refined, (lo, hi), same = _settle([5.0, 6.0, 7.0], [4.0, 5.0, 6.0], 3.0, 4.0, [1.0, 2.5])
+    assert refined == [] and same
+    assert lo == 3.0 and hi == math.inf
+    assert all(r.to_dict("not needed")["skipped"] == "not needed" for r in runs)
+
+
+def test_only_controls_whose_run_crosses_a_decision_are_refined():
+    # The decision flips at 5: runs 0 and 2 (own gaps 4 and 4.5) cannot reach it, run 1 (8) can.
+    runs, refined, (lo, hi), same = _settle([4.0, 8.0, 4.5], [3.0, 2.0, 4.4], 1.0, 2.0, [5.0])
+    assert refined == [(0, False), (1, False), (2, False), (1, True)]
+    assert same and (lo, hi) == (2.0, 4.5)
+    assert [r.done for r in runs] == [False, True, False]
+    assert runs[1].gap == 2.0 and runs[0].bounds() == (0.0, 4.0)
+
+
+def test_every_run_is_refined_when_the_decision_sits_between_their_gaps():
+    _, refined, (lo, hi), same = _settle([9.0, 9.5, 9.8], [6.0, 3.0, 2.5], 1.0, 2.0, [5.0])
+    assert sorted(refined) == [(0, False), (0, True), (1, False), (1, True), (2, False), (2, True)]
+    assert same and lo == hi == 6.0
+
+
+def test_idle_workers_take_controls_only_where_first_stages_need_two_rounds_anyway():
+    from physinfer.discrepancy.calibration_stage import with_idle_controls
+
+    # Three first stages on two workers take two rounds: one run's control fits in the idle slot.
+    assert with_idle_controls([0, 1, 2], False, 2) == [(0, True), (1, False), (2, False)]
+    # One round (or one process): a control would add a round, so none is added.
+    assert with_idle_controls([0, 1], False, 2) == [(0, False), (1, False)]
+    assert with_idle_controls([0], False, 2) == [(0, False)]
+    assert with_idle_controls([0, 1, 2], False, 1) == [(0, False), (1, False), (2, False)]
+    # Controls asked for stay asked for.
+    assert with_idle_controls([1, 2, 0], True, 2) == [(1, True), (2, True), (0, True)]
+
+
+# ------------------------------------------------------------------ the workflow on the pendulum
+
+
+def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(tmp_path: Path):
+    from tests.core.test_diagnose import _diagnose, _pendulum_target
+
+    target = _pendulum_target(tmp_path, "quadratic_drag")
+    kw = {"steps": 3, "optimizer": "random", "limits": False, "workers": 1}
+    needed = _diagnose(tmp_path / "needed", target, **kw)
+    full = _diagnose(tmp_path / "all", target, calibrate_all=True, **kw)
+    for key in ("misspecified", "misspecified_by", "gap_test", "named_effect", "gap_before", "tested_gap"):
+        assert needed[key] == full[key], key
+    assert [c["significant"] for c in needed["candidates"]] == [c["significant"] for c in full["candidates"]]
+    lo, hi = needed["null_scale_range"]
+    assert needed["null_scale"] == lo and lo <= full["null_scale"] <= (hi if hi is not None else math.inf)
+    assert full["null_scale_range"] == [full["null_scale"]] * 2
+    out = tmp_path / "needed" / "diag-quadratic_drag"
+    for run in needed["calibration"]:
+        r = run["run"]
+        ran_control = (out / f"calibration-{r}-control" / "gap.json").is_file()
+        assert ran_control == (run["gap_control"] is not None)
+        assert ("skipped" in run) == (run["gap"] is None)
+        if run["gap"] is not None:  # a finished run's gap is the one the full calibration found
+            assert run["gap"] == full["calibration"][r]["gap"]
+    # A re-run reads every stage back and decides the same without refining anything.
+    again = _diagnose(tmp_path / "needed", target, **kw)
+    assert again["calibration"] == needed["calibration"] and again["named_effect"] == needed["named_effect"]
