@@ -78,7 +78,6 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
 
 
 
-@with_refinement_threads
 def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
     """The trials of a refinement: ``steps`` when given; otherwise the phenomenon's default,
     or its ``default_steps_with_posterior`` when the search starts from a posterior estimator."""
@@ -89,6 +88,7 @@ def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) 
     return int(phenomenon.default_steps)
 
 
+@with_refinement_threads
 def refine(
     registry: Registry,
     *,
