@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from html import escape as html_escape
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +86,24 @@ def test_idle_workers_take_controls_only_where_first_stages_need_two_rounds_anyw
     assert with_idle_controls([1, 2, 0], True, 2) == [(1, True), (2, True), (0, True)]
 
 
+def test_limits_at_the_upper_end_of_a_range_say_so_in_the_verdict_and_on_the_page():
+    from physinfer.discrepancy.needed_calibration import limits_scale_note
+    from physinfer.report.diagnose_page import detection_limits
+
+    candidate = {"effect": "quadratic_drag", "detectable_from": {"drag_quadratic": 0.5},
+                 "limit": {"fraction": 0.25, "reason": None, "mimicked_by": [], "reveal": []}}  # fmt: skip
+    exact = {"named_effect": None, "candidates": [candidate],
+             "limits": {"clip_seconds": 4.0, "null_scale": 0.8, "null_scale_exact": True}}  # fmt: skip
+    assert limits_scale_note(exact) is None
+    html = detection_limits(exact)
+    assert "Detection limits" in html and "quadratic_drag: not named; this 4-s clip" in html
+    ranged = {**exact, "limits": {**exact["limits"], "null_scale": 2.608, "null_scale_exact": False}}
+    note = limits_scale_note(ranged)
+    assert note and "2.608" in note and "--calibrate-all" in note
+    assert html_escape(note) in detection_limits(ranged)
+    assert "--no-limits" in detection_limits({**exact, "limits": None})
+
+
 # ------------------------------------------------------------------ the workflow on the pendulum
 
 
@@ -92,7 +111,7 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     from tests.core.test_diagnose import _diagnose, _pendulum_target
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
-    kw = {"steps": 3, "optimizer": "random", "limits": False, "workers": 1}
+    kw = {"steps": 3, "optimizer": "random", "limits": True, "workers": 1}
     needed = _diagnose(tmp_path / "needed", target, **kw)
     full = _diagnose(tmp_path / "all", target, calibrate_all=True, **kw)
     for key in ("misspecified", "misspecified_by", "gap_test", "named_effect", "gap_before", "tested_gap"):
@@ -101,6 +120,10 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     lo, hi = needed["null_scale_range"]
     assert needed["null_scale"] == lo and lo <= full["null_scale"] <= (hi if hi is not None else math.inf)
     assert full["null_scale_range"] == [full["null_scale"]] * 2
+    # The limits assume the range's upper end (the full calibration's own scale when exact).
+    assert full["limits"]["null_scale"] == full["null_scale"] and full["limits"]["null_scale_exact"]
+    assert needed["limits"]["null_scale_exact"] == (lo == hi)
+    assert needed["limits"]["null_scale"] >= full["null_scale"]
     out = tmp_path / "needed" / "diag-quadratic_drag"
     for run in needed["calibration"]:
         r = run["run"]

@@ -285,3 +285,4 @@ def test_a_diagnosis_gets_a_page_with_its_verdict_maps_and_video(tmp_path):
         "quadratic_drag" in page and "effect-quadratic_drag" in page
     )  # candidates and stage folders
     assert f"{report['gap_before']:.4g}" in page
+    assert "Detection limits" in page and "quadratic_drag: " in page  # one line per candidate

@@ -154,7 +154,7 @@ def diagnose_cmd(
     from physinfer import api
     from physinfer.cli.app import options_from_cli
     from physinfer.discrepancy.limits import limit_line
-    from physinfer.discrepancy.needed_calibration import null_scale_words
+    from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 
     options = options_from_cli(api.DiagnoseOptions, given)
     diagnosis = api.diagnose(
@@ -185,6 +185,8 @@ def diagnose_cmd(
             err_console.print(
                 "  " + limit_line(c, report["named_effect"], report["limits"]["clip_seconds"]), highlight=False
             )
+        if note := limits_scale_note(report):
+            err_console.print(f"  ({note})", highlight=False)
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 

@@ -144,5 +144,18 @@ def null_scale_words(report: Mapping[str, Any]) -> str:
     return text
 
 
+def limits_scale_note(report: Mapping[str, Any]) -> str | None:
+    """What the detection limits assume when the null scale is only known as a range (the
+    upper end: a limit never lower than with every run refined), or ``None``."""
+    limits = report.get("limits") or {}
+    if limits.get("null_scale_exact", True):
+        return None
+    return (
+        f"the detection limits assume a null scale of {_g(limits.get('null_scale'))}, the upper end of what "
+        "the decisions allow (self-consistency runs they did not need were skipped), so they may be higher "
+        "than with every run refined; --calibrate-all gives them at the diagnosis' own null scale"
+    )
+
+
 def _g(value: Any) -> str:
     return "–" if value is None else f"{float(value):.4g}"

@@ -389,9 +389,9 @@ def _diagnose_stages(
         n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], runs,
                                         n_gaps=2 + runs * (2 if settings.calibration_control else 1)
                                         + 2 * len(effect_objs))  # fmt: skip
+        limits_at = limit_scale(scale_range, gap0.floor_q95)
         with clock.stage("limits"):
-            limits = run_limits(registry, settings, base, target, before, effect_objs,
-                                limit_scale(scale_range, gap0.floor_q95), n_sims, say, pool)  # fmt: skip
+            limits = run_limits(registry, settings, base, target, before, effect_objs, limits_at, n_sims, say, pool)
         for cand in candidates:
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
@@ -404,7 +404,10 @@ def _diagnose_stages(
             baseline,
         )
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
-    report["limits"] = None if limits is None else {k: v for k, v in limits.items() if k != "effects"}
+    if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
+        limits = {k: v for k, v in limits.items() if k != "effects"}
+        limits.update(null_scale=limits_at, null_scale_exact=scale_range[0] == scale_range[1])
+    report["limits"] = limits
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report

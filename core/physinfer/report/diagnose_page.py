@@ -11,7 +11,8 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from physinfer.discrepancy.needed_calibration import null_scale_words
+from physinfer.discrepancy.limit_text import limit_line
+from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 from physinfer.report.common import Content, parameter_table, read_json, units_of
 from physinfer.report.markup import (
     figure,
@@ -39,6 +40,7 @@ def diagnose_content(run: Path) -> Content:
     settings.update(report.get("settings") or {})
     body = [
         section("Verdict", verdict(report), candidates(report.get("candidates") or [])),
+        detection_limits(report),
         _parameters(report, model),
         section(
             "Where the fit disagrees",
@@ -99,6 +101,21 @@ def candidates(found: Sequence[Mapping[str, Any]]) -> str:
         numbers = (c.get("gap"), c.get("ratio"), c.get("p_value"), c.get("significant"))
         rows.append((c.get("effect"), c.get("description"), *numbers, values, bounds))
     return table(headers, rows)
+
+
+def detection_limits(report: Mapping[str, Any]) -> str:
+    """Per candidate, the weakest strength this clip could name (``--no-limits``: a note)."""
+    limits = report.get("limits")
+    if not limits:
+        return section("Detection limits", paragraph("not computed (--no-limits)", "note"))
+    lines = [
+        paragraph(limit_line(c, report.get("named_effect"), limits.get("clip_seconds")))
+        for c in report.get("candidates") or []
+        if "detectable_from" in c
+    ]
+    if note := limits_scale_note(report):
+        lines.append(paragraph(note, "note"))
+    return section("Detection limits", *lines)
 
 
 def localisation(loc: Mapping[str, Any], regions: Sequence[Mapping[str, Any]]) -> str:
