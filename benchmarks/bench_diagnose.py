@@ -23,6 +23,13 @@ Example (the numbers in docs/benchmarks.md)::
     ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --shard 0/2 --out DIR &
     ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --shard 1/2 --out DIR
     ... bench_diagnose.py --plugin flag_lite --embedder spectral ... --merge --out DIR
+
+``--timing`` diagnoses each case from scratch once per ``--timing-modes`` mode — ``w1-all``
+(one process, every self-consistency run refined: how the stored tables were made), ``all``
+(workers, every run), ``needed`` (workers, only the runs a decision needs: the default) —
+prints the wall time per diagnosis and per stage, and exits 1 when any decision (named
+effect, misspecified, each candidate's significance) differs between the modes.
+``--timing-reuse`` takes a mode's row from an earlier invocation's ``case-timing-*.json``.
 """
 
 from __future__ import annotations
