@@ -102,6 +102,10 @@ def test_limits_at_the_upper_end_of_a_range_say_so_in_the_verdict_and_on_the_pag
     assert note and "2.608" in note and "--calibrate-all" in note
     assert html_escape(note) in detection_limits(ranged)
     assert "--no-limits" in detection_limits({**exact, "limits": None})
+    # Where the range's lower end reads another limit, the line gives it too.
+    low = {"detectable_from": None, "reason": "mimicked by damping", "threshold": 0.1}
+    ranged["candidates"] = [{**candidate, "limit": {**candidate["limit"], "at_lower_scale": low}}]
+    assert html_escape("[at the null scale's lower end: could not reveal it") in detection_limits(ranged)
 
 
 # ------------------------------------------------------------------ the workflow on the pendulum
@@ -124,6 +128,8 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     assert full["limits"]["null_scale"] == full["null_scale"] and full["limits"]["null_scale_exact"]
     assert needed["limits"]["null_scale_exact"] == (lo == hi)
     assert needed["limits"]["null_scale"] >= full["null_scale"]
+    for c in needed["candidates"]:  # read at the lower end too, from the same ladder
+        assert ("at_lower_scale" in c["limit"]) == (needed["limits"]["null_scale"] != lo)
     out = tmp_path / "needed" / "diag-quadratic_drag"
     for run in needed["calibration"]:
         r = run["run"]

@@ -61,9 +61,12 @@ def run_limits(
     n_sims: int,
     say: Log,
     pool: WorkerPool | None = None,
+    scale_low: float | None = None,
 ) -> dict[str, Any]:
     """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``;
-    the effects' ladders side by side on ``pool`` when it has workers."""
+    the effects' ladders side by side on ``pool`` when it has workers. ``scale_low``: where
+    the null scale is only known as a range (``scale`` its upper end), its lower end, at
+    which each limit is read again from the same ladder (``at_lower_scale``)."""
     import dataclasses
     import json
 
@@ -74,6 +77,7 @@ def run_limits(
     key = {
         "theta": {k: float(v) for k, v in theta.items()},
         "scale": float(scale),
+        **({"scale_low": float(scale_low)} if scale_low is not None else {}),
         "effects": sorted(effect_objs),
         "config": settings.limit_config.to_dict(),
         "seed": settings.seed,
@@ -126,6 +130,7 @@ def run_limits(
         seed=settings.seed,
         diagnosis_simulations=n_sims,
         make_longer=make_longer,
+        scale_low=scale_low,
     )
     from physinfer.discrepancy.parallel import limit_runner
 

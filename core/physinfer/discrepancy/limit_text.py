@@ -37,4 +37,8 @@ def limit_line(candidate: Mapping[str, Any], named: str | None, clip_seconds: fl
     limit = {**candidate.get("limit", {}), "detectable_from": candidate.get("detectable_from")}
     status = "named" if candidate["effect"] == named else "not named"
     clip = "this clip" if clip_seconds is None else f"this {clip_seconds:.3g}-s clip"
-    return f"{candidate['effect']}: {status}; {clip} {summary_phrase(limit)}{reveal_phrase(limit)}"
+    line = f"{candidate['effect']}: {status}; {clip} {summary_phrase(limit)}{reveal_phrase(limit)}"
+    low = limit.get("at_lower_scale")
+    if low and low["detectable_from"] != limit["detectable_from"]:  # the null scale is a range
+        line += f" [at the null scale's lower end: {summary_phrase(low).removeprefix('could reveal ')}]"
+    return line

@@ -130,6 +130,8 @@ class LimitInputs:
         base_embeddings: ``(K, D_e)`` θ̂'s re-simulations from the gap measurement (reused).
         render_params: The target's ζ.
         scale: The null scale ``S``.
+        scale_low: The lower end of its range when the diagnosis knows it only as a range
+            (``scale`` is then the upper end), else ``None``.
         rule: The decision rule.
         floor_samples: ``K``.
         seed: The diagnosis seed (the ladder's seeds are derived from it).
@@ -151,6 +153,7 @@ class LimitInputs:
     seed: int
     diagnosis_simulations: int
     make_longer: Callable[[float], tuple[Any, dict[str, Any], Any]] | None = None
+    scale_low: float | None = None
 
 
 def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -> int:
@@ -187,6 +190,8 @@ class EffectTask:
         seeds: Each rung's seeds.
         refit_seeds: The baseline's seeds (Jacobian, refits).
         deterministic: One clip per rung, every rung's refit measured.
+        threshold_low: The threshold at the lower end of the null scale's range, where the
+            diagnosis knows its null scale only as a range (``None``: it knows it).
     """
 
     name: str
@@ -198,6 +203,7 @@ class EffectTask:
     seeds: tuple[int, ...]
     refit_seeds: tuple[int, ...]
     deterministic: bool
+    threshold_low: Threshold | None = None
 
 
 def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[dict[str, Any], Ladder]:
@@ -205,8 +211,15 @@ def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[
     effect_space = augmented.effects[0].parameter_space
     ladder = run_ladder(probe, augmented, task.theta, effect_space, task.fractions, task.seeds)
     common = (probe, ladder, task.theta, task.base_embeddings, task.jac, task.threshold, list(task.refit_seeds))
-    limit = effect_limit(*common, effect_space=effect_space, measure="all" if task.deterministic else "key")
+    measure = "all" if task.deterministic else "key"
+    limit = effect_limit(*common, effect_space=effect_space, measure=measure)
     limit["threshold"] = task.threshold.at()
+    if task.threshold_low is not None and task.threshold_low != task.threshold:
+        # The same rungs read at the range's lower end: the limit with every run refined lies between.
+        low = effect_limit(*common[:5], task.threshold_low, *common[6:], effect_space=effect_space, measure=measure)
+        limit["at_lower_scale"] = {
+            "detectable_from": low["detectable_from"], "reason": low["reason"], "threshold": task.threshold_low.at(),
+        }  # fmt: skip
     limit["reveal"] = reveal_by_fixing(*common, limit, effect_space)
     return limit, ladder
 
@@ -244,16 +257,20 @@ def detection_limits(
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
     jac, jac_trajs = jacobian(probe, theta, base_emb, refit_seeds, config.step)
     seconds = next((t.vertices.shape[0] / t.fps for t in jac_trajs if t is not None), None)
-    thresholds = {
-        name: Threshold.of(
-            inputs.scale, len(pipeline.effects[0].parameter_space), inputs.rule, len(inputs.augmented),
-            inputs.floor_samples,
-        )  # fmt: skip
-        for name, pipeline in inputs.augmented.items()
-    }
+    def thresholds_at(scale: float) -> dict[str, Threshold]:
+        return {
+            name: Threshold.of(
+                scale, len(pipeline.effects[0].parameter_space), inputs.rule, len(inputs.augmented),
+                inputs.floor_samples,
+            )  # fmt: skip
+            for name, pipeline in inputs.augmented.items()
+        }
+
+    thresholds = thresholds_at(inputs.scale)
+    low = thresholds_at(inputs.scale_low) if inputs.scale_low is not None else {}
     tasks = [
         EffectTask(name, theta, base_emb, jac, thresholds[name], tuple(config.fractions), tuple(seeds),
-                   tuple(refit_seeds), deterministic)  # fmt: skip
+                   tuple(refit_seeds), deterministic, low.get(name))  # fmt: skip
         for name in inputs.augmented
     ]
     if run_tasks is None:

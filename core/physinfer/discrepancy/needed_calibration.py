@@ -153,7 +153,8 @@ def limits_scale_note(report: Mapping[str, Any]) -> str | None:
     return (
         f"the detection limits assume a null scale of {_g(limits.get('null_scale'))}, the upper end of what "
         "the decisions allow (self-consistency runs they did not need were skipped), so they may be higher "
-        "than with every run refined; --calibrate-all gives them at the diagnosis' own null scale"
+        "than with every run refined (in brackets where its lower end reads otherwise; the limits with every "
+        "run refined lie between); --calibrate-all gives them at the diagnosis' own null scale"
     )
 
 

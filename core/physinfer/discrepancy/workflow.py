@@ -390,8 +390,10 @@ def _diagnose_stages(
                                         n_gaps=2 + runs * (2 if settings.calibration_control else 1)
                                         + 2 * len(effect_objs))  # fmt: skip
         limits_at = limit_scale(scale_range, gap0.floor_q95)
+        low = scale_range[0] if limits_at != scale_range[0] else None  # read there too
         with clock.stage("limits"):
-            limits = run_limits(registry, settings, base, target, before, effect_objs, limits_at, n_sims, say, pool)
+            limits = run_limits(registry, settings, base, target, before, effect_objs, limits_at, n_sims, say, pool,
+                                scale_low=low)  # fmt: skip
         for cand in candidates:
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
