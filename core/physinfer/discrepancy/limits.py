@@ -273,23 +273,16 @@ def detection_limits(
                    tuple(refit_seeds), deterministic, low.get(name))  # fmt: skip
         for name in inputs.augmented
     ]
-    if run_tasks is None:
-        results = []
-        for task in tasks:
+    # Tasks run elsewhere come back with their results; the rest (or one that failed there) run here.
+    results = run_tasks(tasks) if run_tasks is not None else [None] * len(tasks)
+    for i, task in enumerate(tasks):
+        if results[i] is None:
             before = probe.simulations
             limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
-            results.append((limit, ladder, probe.simulations - before))
-            say(f"      {task.name}: " + summary_phrase(limit))
-    else:
-        results = run_tasks(tasks)
-        for i, task in enumerate(tasks):
-            if results[i] is None:  # failed where it ran: here instead
-                before = probe.simulations
-                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
-                results[i] = (limit, ladder, probe.simulations - before)
-            else:
-                probe.simulations += results[i][2]
-            say(f"      {task.name}: " + summary_phrase(results[i][0]))
+            results[i] = (limit, ladder, probe.simulations - before)
+        else:
+            probe.simulations += results[i][2]
+        say(f"      {task.name}: " + summary_phrase(results[i][0]))
     effects = {task.name: limit for task, (limit, _, _) in zip(tasks, results, strict=True)}
     ladders = {task.name: ladder for task, (_, ladder, _) in zip(tasks, results, strict=True)}
     if config.reveal and not deterministic:

@@ -247,7 +247,7 @@ class WorkerPool:
 
     def __init__(self, settings: DiagnoseSettings, effects: Sequence[str], most_jobs: int, say: Log) -> None:
         self.settings = settings
-        self.size, why_not = usable_workers(settings, most_jobs, effects) if most_jobs else (1, None)
+        self.size, why_not = usable_workers(settings, most_jobs, effects)
         if why_not:
             say(f"      {why_not}")
         self.why_one_process = why_not
@@ -317,10 +317,9 @@ def run_on_workers(
     """Run ``jobs`` (:func:`stage_jobs`) on the pool when it has more than one worker; how
     they ran. ``label``: the clock's name for the wall time of the jobs together (rounds
     under one label add up)."""
-    how: dict[str, Any] = {"workers": pool.size if pool.size > 1 else 1, "scheduler": pool.settings.scheduler}
     if pool.size < 2:
-        how["scheduler"] = None
-        return {**how, **({"why_one_process": pool.why_one_process} if pool.why_one_process else {})}
+        return {"workers": 1, "scheduler": None, **({"why_one_process": pool.why_one_process} if pool.why_one_process else {})}
+    how = {"workers": pool.size, "scheduler": pool.settings.scheduler}
     if not jobs:
         return how
     say(f"      {len(jobs)} jobs run side by side on {pool.where()}")

@@ -11,14 +11,14 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
                          ``calibration/`` left by an older version is renamed ``calibration-0/``
     calibration-<r>-control/  with ``calibration_control``: run r refined ``effect_steps``
                          more trials from its best θ, as ``control/`` continues the baseline
+    limits.json          each candidate's detection limit at the best baseline fit
+                         (:mod:`physinfer.discrepancy.limits`; skipped with ``limits=False``)
+    diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
 
 The self-consistency runs come last and only as far as a decision depends on them
 (:mod:`physinfer.discrepancy.needed_calibration`; all of them with ``calibrate_all``): the
 decisions are monotone in the null scale, and where they are the same over the range of
 scales the unrefined runs allow, those runs are skipped.
-    limits.json          each candidate's detection limit at the best baseline fit
-                         (:mod:`physinfer.discrepancy.limits`; skipped with ``limits=False``)
-    diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
 
 Step 2's gap is each model's best θ re-simulated under the same ``K`` fresh seeds (see
 :mod:`physinfer.discrepancy.gap`); the decisions are in :mod:`physinfer.discrepancy.decide`.
