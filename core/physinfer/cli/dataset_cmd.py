@@ -8,6 +8,7 @@ path (:func:`physinfer.cli.app.handle_errors`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -67,6 +68,15 @@ def generate_cmd(
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Dataset seed: same seed, same data.")] = 0,
     scene_set: SceneSetOpt = [],  # noqa: B006
+    scene_range: Annotated[
+        list[str],
+        typer.Option(
+            "--scene-range",
+            help="Vary a numeric scene setting across the dataset: NAME=LOW:HIGH (repeatable), drawn "
+            "per simulation (log-uniform for positive ranges); an estimator trained on it takes the "
+            "setting as an input (`--scene-set` at inference), e.g. flag_length=0.9:3.",
+        ),
+    ] = [],  # noqa: B006
     verify: Annotated[
         bool, typer.Option("--verify/--no-verify", help="On resume, check every checksum (reads all data).")
     ] = True,
@@ -89,6 +99,7 @@ def generate_cmd(
         seed=seed,
         verify=verify,
         scene_set=scene_set,
+        scene_range=scene_range,
     )
     summary = result.summary()
     _stderr(_summary_line(result))
@@ -113,15 +124,26 @@ def _generate(
     seed: int,
     verify: bool,
     scene_set: list[str],
+    scene_range: Sequence[str] = (),
 ) -> GenerateResult:
     from physinfer.datasets import generate_dataset, generator_for, parse_split_counts
     from physinfer.plugins import load_registry
-    from physinfer.scene import bind_scene, parse_scene_set, resolve_scene, scene_text
+    from physinfer.scene import (
+        bind_scene,
+        parse_scene_ranges,
+        parse_scene_set,
+        resolve_scene,
+        scene_text,
+    )
 
     registry, _infos = load_registry()
     phenomenon = registry.phenomenon(plugin)
     scene = resolve_scene(phenomenon, parse_scene_set(scene_set))
-    generator = generator_for(bind_scene(phenomenon, scene))
+    ranges = parse_scene_ranges(phenomenon, scene_range)
+    both = sorted(set(ranges) & set(parse_scene_set(scene_set)))
+    if both:
+        raise UserInputError(f"{', '.join(both)}: given both --scene-set and --scene-range; give one")
+    generator = generator_for(bind_scene(phenomenon, scene), scene_ranges=ranges)
     chosen = _choose_preset(generator.presets(), preset_name, plugin)
     chosen = chosen.with_overrides(
         sims=parse_split_counts(sims, "--sims") if sims is not None else None,
@@ -139,7 +161,8 @@ def _generate(
     _stderr(
         f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
         f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing}"
-        f"{f', scene {scene_text(scene)}' if scene else ''} "
+        f"{f', scene {scene_text(scene)}' if scene else ''}"
+        f"{''.join(f', {k} {a:g}..{b:g}' for k, (a, b) in ranges.items())} "
         f"→ {out} ({where})"
     )
     with _RichProgress() as progress:

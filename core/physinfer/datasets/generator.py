@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,8 @@ class DatasetGenerator(ABC):
 
     phenomenon: str
     parameter_space: ParameterSpace
+    #: Scene settings each simulation draws from a range (``--scene-range``); empty: one scene.
+    scene_ranges: Mapping[str, tuple[float, float]] = MappingProxyType({})
 
     def presets(self) -> Mapping[str, DatasetPreset]:
         """The presets ``--preset`` chooses from; the default offers ``paper`` and ``cpu``."""
@@ -59,6 +62,28 @@ class DatasetGenerator(ABC):
             Physical values by name, every one within ``parameter_space``'s bounds.
         """
         return self.parameter_space.sample(rng, 1)[0]
+
+    def sample_scene(self, rng: np.random.Generator) -> dict[str, float] | None:
+        """Draw the ranged scene settings of one simulation (``None`` without ranges).
+
+        Args:
+            rng: The simulation's own scene generator (derived from the dataset seed).
+        """
+        if not self.scene_ranges:
+            return None
+        from physinfer.scene import sample_scene
+
+        return sample_scene(rng, self.scene_ranges)
+
+    def in_scene(self, scene: Mapping[str, float]) -> DatasetGenerator:
+        """A generator that simulates and renders in ``scene`` (drawn by :meth:`sample_scene`).
+
+        Raises:
+            UserInputError: this generator cannot vary its scene.
+        """
+        raise UserInputError(
+            f"the dataset generator {type(self).__name__} cannot vary its scene; drop --scene-range"
+        )
 
     @abstractmethod
     def simulate_batch(
@@ -112,6 +137,9 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         phenomenon: The phenomenon record (pickled to workers with its factories).
         effects: Effects switched into the simulator (none: the baseline model).
         presets: Presets offered instead of the defaults.
+        scene_ranges: Scene settings each simulation draws from a range (validated by
+            :func:`physinfer.scene.parse_scene_ranges`); the record's own scene (or the
+            defaults) gives the rest.
     """
 
     def __init__(
@@ -120,8 +148,11 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         phenomenon: Phenomenon,
         effects: Sequence[Effect] = (),
         presets: Mapping[str, DatasetPreset] | None = None,
+        scene_ranges: Mapping[str, tuple[float, float]] | None = None,
     ) -> None:
         self.record = phenomenon
+        self.scene_ranges = {k: (float(a), float(b)) for k, (a, b) in (scene_ranges or {}).items()}
+        self._scene_variant: tuple[str, PhenomenonDatasetGenerator] | None = None
         self.phenomenon = phenomenon.name
         self.effects = tuple(effects)
         self.parameter_space = phenomenon.parameter_space
@@ -137,7 +168,30 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         state = self.__dict__.copy()
         state["_simulator"] = None
         state["_renderer"] = None
+        state["_scene_variant"] = None
         return state
+
+    def in_scene(self, scene: Mapping[str, float]) -> PhenomenonDatasetGenerator:
+        """This generator with its record bound to the record's scene updated by ``scene``.
+
+        The last scene's generator is kept (a unit's simulation is rendered right after it
+        is simulated); the one before it is closed, so renderers do not pile up.
+        """
+        import json
+
+        from physinfer.scene import bind_scene, resolve_scene, scene_of
+
+        key = json.dumps(dict(scene), sort_keys=True)
+        if self._scene_variant is not None and self._scene_variant[0] == key:
+            return self._scene_variant[1]
+        if self._scene_variant is not None:
+            self._scene_variant[1].close()
+        full = resolve_scene(self.record, {**(scene_of(self.record) or {}), **dict(scene)})
+        variant = PhenomenonDatasetGenerator(
+            phenomenon=bind_scene(self.record, full), effects=self.effects, presets=self._presets
+        )
+        self._scene_variant = (key, variant)
+        return variant
 
     def presets(self) -> Mapping[str, DatasetPreset]:
         """The presets given at construction, else ``paper`` and ``cpu``."""
@@ -183,26 +237,36 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         return self.renderer.render(trajectory, render_params)
 
     def close(self) -> None:
-        """Close the renderer if one was built."""
+        """Close the renderer if one was built (and the last scene's)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self._scene_variant is not None:
+            self._scene_variant[1].close()
+            self._scene_variant = None
 
 
-def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> DatasetGenerator:
+def generator_for(
+    phenomenon: Phenomenon,
+    *,
+    effects: Sequence[Effect] = (),
+    scene_ranges: Mapping[str, tuple[float, float]] | None = None,
+) -> DatasetGenerator:
     """The dataset generator of ``phenomenon``.
 
     ``Phenomenon.dataset_generator`` may hold a :class:`DatasetGenerator`, a factory
     called as ``factory(phenomenon=..., effects=...)`` (a subclass of
     :class:`PhenomenonDatasetGenerator` is one), or a ``"module:attr"`` reference to
-    either; ``None`` gives :class:`PhenomenonDatasetGenerator`.
+    either; ``None`` gives :class:`PhenomenonDatasetGenerator`. ``scene_ranges``
+    (``--scene-range``) go to a factory that takes them; other generators refuse them.
 
     Raises:
-        UserInputError: when the reference cannot be imported or builds something else.
+        UserInputError: when the reference cannot be imported or builds something else,
+            or cannot vary the scene it is asked to.
     """
     spec = phenomenon.dataset_generator
     if spec is None:
-        return PhenomenonDatasetGenerator(phenomenon=phenomenon, effects=effects)
+        return PhenomenonDatasetGenerator(phenomenon=phenomenon, effects=effects, scene_ranges=scene_ranges)
     try:
         obj = resolve(spec)
     except (ImportError, AttributeError, ValueError) as exc:
@@ -211,10 +275,16 @@ def generator_for(phenomenon: Phenomenon, *, effects: Sequence[Effect] = ()) -> 
             f"({type(exc).__name__}: {exc})"
         ) from None
     if not isinstance(obj, DatasetGenerator) and callable(obj):
-        obj = obj(phenomenon=phenomenon, effects=effects)
+        extra = {"scene_ranges": scene_ranges} if scene_ranges and accepts_keyword(obj, "scene_ranges") else {}
+        obj = obj(phenomenon=phenomenon, effects=effects, **extra)
     if not isinstance(obj, DatasetGenerator):
         raise UserInputError(
             f"phenomenon {phenomenon.name!r}: dataset_generator {spec!r} gave "
             f"{type(obj).__name__}, not a physinfer.datasets.DatasetGenerator"
+        )
+    if scene_ranges and dict(obj.scene_ranges) != dict(scene_ranges):
+        raise UserInputError(
+            f"phenomenon {phenomenon.name!r}: its dataset generator {spec!r} cannot vary the scene; "
+            "drop --scene-range"
         )
     return obj

@@ -43,6 +43,8 @@ class ClipDataset(Sequence[np.ndarray]):
         render_ids: ``(N,)`` int64 global render id of each clip.
         params: ``(N, D)`` float64 θ of each clip, physical units.
         params_unit: ``(N, D)`` float64 θ normalised to ``[-1, 1]``.
+        scene_ranges: The settings varied across the dataset (``--scene-range``), or ``{}``.
+        scenes: The ranged settings of each clip's simulation (``{}`` each without ranges).
 
     Raises:
         UserInputError: when ``root`` is not a complete dataset or ``split`` is unknown.
@@ -76,6 +78,8 @@ class ClipDataset(Sequence[np.ndarray]):
         self.params_unit = np.array([self.parameter_space.to_unit(row["params"]) for row in self.rows]).reshape(
             self.params.shape
         )
+        self.scene_ranges: dict[str, list[float]] = dict(config.get("scene_ranges") or {})
+        self.scenes: list[dict[str, float]] = [dict(row.get("scene") or {}) for row in self.rows]
         self._shards: dict[str, np.ndarray] = {}
 
     def __len__(self) -> int:

@@ -2,7 +2,8 @@
 
 Randomness is keyed, never sequential: the seeds of simulation ``local`` of split ``s``
 come from ``SeedSequence(seed, spawn_key=(s, local, stream, ...))`` with stream 0 for θ,
-1 for the simulator's seed and ``(2, r)`` for ζ of render ``r``. With the preset's
+1 for the simulator's seed, ``(2, r)`` for ζ of render ``r`` and 3 for the ranged scene
+settings (``--scene-range``; keyed like θ, so simulations sharing θ share the scene). With the preset's
 ``seeds_per_theta`` = n > 1, θ of simulation ``local`` comes from the θ stream of
 ``local // n`` instead, so n consecutive simulations share θ while each keeps its own
 simulator seed (n = 1 is the plain rule). So a dataset does not
@@ -21,7 +22,7 @@ import numpy as np
 from physinfer.datasets.generator import DatasetGenerator
 from physinfer.datasets.presets import SPLITS, DatasetPreset
 
-THETA_STREAM, SIM_STREAM, RENDER_STREAM = 0, 1, 2
+THETA_STREAM, SIM_STREAM, RENDER_STREAM, SCENE_STREAM = 0, 1, 2, 3
 
 
 def seed_sequence(seed: int, split: str, local: int, *stream: int) -> np.random.SeedSequence:
@@ -53,6 +54,7 @@ class SimulationPlan:
         seed: The simulator's seed (31 bits, accepted by every RNG).
         n_renders: How many clips are rendered from it.
         first_render: Global id of its first render; its renders are consecutive.
+        scene: Its ranged scene settings (``--scene-range``), or ``None`` (the dataset's one scene).
     """
 
     sim: int
@@ -62,6 +64,7 @@ class SimulationPlan:
     seed: int
     n_renders: int
     first_render: int
+    scene: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,10 @@ def plan_dataset(generator: DatasetGenerator, preset: DatasetPreset, seed: int) 
             _check_within_bounds(generator, params)
             sim_seed = int(seed_sequence(seed, split, local, SIM_STREAM).generate_state(1)[0] & 0x7FFFFFFF)
             n_renders = preset.renders_of(split, local)
-            sims.append(SimulationPlan(sim_id, split, local, params, sim_seed, n_renders, render_id))
+            scene = generator.sample_scene(
+                np.random.default_rng(seed_sequence(seed, split, theta_key, SCENE_STREAM))
+            )
+            sims.append(SimulationPlan(sim_id, split, local, params, sim_seed, n_renders, render_id, scene))
             sim_id += 1
             render_id += n_renders
         for start in range(0, len(sims), preset.sims_per_unit):

@@ -36,8 +36,8 @@ if TYPE_CHECKING:
 def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int) -> dict[str, Any]:
     """What determines a dataset's content; a resumed run must match it exactly.
 
-    ``scene`` (``dataset generate --scene-set``) is recorded only when one was given, so
-    datasets made before scenes existed still resume.
+    ``scene`` (``dataset generate --scene-set``) and ``scene_ranges`` (``--scene-range``)
+    are recorded only when given, so datasets made before scenes existed still resume.
     """
     from physinfer.scene import scene_of
 
@@ -53,6 +53,8 @@ def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int
     scene = scene_of(getattr(generator, "record", None))
     if scene is not None:
         config["scene"] = scene
+    if generator.scene_ranges:
+        config["scene_ranges"] = {name: list(r) for name, r in sorted(generator.scene_ranges.items())}
     return json.loads(json.dumps(to_jsonable(config)))
 
 

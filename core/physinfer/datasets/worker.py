@@ -159,7 +159,8 @@ def run_unit(job: UnitJob) -> dict[str, Any]:
                 for r in range(sim.n_renders):
                     zeta = generator.sample_render_params(render_rng(job.seed, sim.split, sim.local, r))
                     t_r = time.perf_counter()
-                    shard[index] = to_stored(generator.render(traj, zeta, clip=job.clip), job.clip)
+                    scene_generator = generator if sim.scene is None else generator.in_scene(sim.scene)
+                    shard[index] = to_stored(scene_generator.render(traj, zeta, clip=job.clip), job.clip)
                     render_s += time.perf_counter() - t_r
                     rows.append(_row(sim, r, zeta, shard_file, index))
                     index += 1
@@ -196,19 +197,37 @@ def simulate_unit(
 ) -> tuple[list[Trajectory | None], list[dict[str, Any]]]:
     """Simulate a unit's batch; on failure, one simulation at a time to find the culprits.
 
+    Simulations with scenes of their own (``--scene-range``) run one at a time, each in
+    its scene (their meshes differ).
+
     Returns:
         One trajectory per simulation (``None`` where it failed) and the failures as
         ``{"sim": id, "error": message}``.
     """
+    if any(s.scene is not None for s in sims):
+        batch: list[Trajectory | None] = [_simulate_one(generator, s, clip) for s in sims]
+    else:
+        batch = _simulate_batch(generator, sims, clip)
+    return _checked(sims, batch)
+
+
+def _simulate_batch(
+    generator: DatasetGenerator, sims: Sequence[SimulationPlan], clip: ClipFormat
+) -> list[Trajectory | None]:
     params, seeds = [s.params for s in sims], [s.seed for s in sims]
     try:
         batch: list[Trajectory | None] = list(generator.simulate_batch(params, seeds, clip=clip))
     except SimulationFailed:
         batch = [_simulate_one(generator, s, clip) for s in sims]
+    return batch
+
+
+def _checked(
+    sims: Sequence[SimulationPlan], batch: list[Trajectory | None]
+) -> tuple[list[Trajectory | None], list[dict[str, Any]]]:
+    """The batch with non-finite trajectories dropped, and the failures."""
     if len(batch) != len(sims):
-        raise PhysinferError(
-            f"{type(generator).__name__}.simulate_batch returned {len(batch)} trajectories for {len(sims)} simulations"
-        )
+        raise PhysinferError(f"simulate_batch returned {len(batch)} trajectories for {len(sims)} simulations")
     failed: list[dict[str, Any]] = []
     for i, (sim, traj) in enumerate(zip(sims, batch, strict=True)):
         if traj is None or not traj.is_finite():
@@ -218,6 +237,8 @@ def simulate_unit(
 
 
 def _simulate_one(generator: DatasetGenerator, sim: SimulationPlan, clip: ClipFormat) -> Trajectory | None:
+    if sim.scene is not None:
+        generator = generator.in_scene(sim.scene)
     try:
         return generator.simulate_batch([sim.params], [sim.seed], clip=clip)[0]
     except SimulationFailed:
@@ -276,4 +297,5 @@ def _row(sim: SimulationPlan, render: int, zeta: dict[str, Any], shard_file: str
         "file": shard_file,
         "index": index,
         "trajectory": trajectory_relpath(sim.sim),
+        **({"scene": dict(sim.scene)} if sim.scene is not None else {}),
     }
