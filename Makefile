@@ -15,7 +15,7 @@ PIP := $(BIN)/pip --disable-pip-version-check
 QUIET_PIP := 2> >(grep -v "is ignored: it is neither" >&2)
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior clean
+.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -95,6 +95,20 @@ posterior: install
 		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior --device cpu \
 		--out runs/flag-posterior-calibration
+
+# The flag's shipped estimator for other sizes: 800 + 200 simulations whose flag length and
+# height are drawn per simulation (log-uniform, 0.9-3 m × 0.6-2 m; about 20 min on 2 cores),
+# the same embedder and flows as `posterior`, with the size as an input; then its calibration.
+posterior-sizes: install
+	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
+		--frames 60 --size 224 --seed 22 --scene-range flag_length=0.9:3 --scene-range flag_height=0.6:2 \
+		--out runs/flag-posterior-sizes
+	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior-sizes --device cpu --seed 0 \
+		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
+		--out plugins/flag/physinfer_flag/data/posterior_sizes.safetensors
+	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior-sizes --device cpu \
+		--posterior plugins/flag/physinfer_flag/data/posterior_sizes.safetensors \
+		--out runs/flag-posterior-sizes-calibration
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

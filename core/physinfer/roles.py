@@ -267,6 +267,10 @@ class Phenomenon:
             flag, 16 trials from the shipped estimator beat 40 (docs/benchmarks.md).
         default_posterior: Path of a shipped posterior estimator (``physinfer posterior
             train``) used by ``infer`` and ``refine`` when none is given; ``None``: none.
+        scene_posteriors: Paths of further shipped estimators, trained across ranges of
+            scene settings (``dataset generate --scene-range``): when a target's scene
+            (``--scene-set``) is not the default estimator's, the first that covers it is
+            used. Empty: none.
         framing: ``(box) -> square``: maps the box ``(x, y, w, h)`` in pixels of the
             region that moves in a video to the square ``(x, y, side, side)`` the
             renderer frames at its default ζ (``physinfer prepare``); ``None``:
@@ -291,6 +295,7 @@ class Phenomenon:
     default_steps: int = 40
     default_steps_with_posterior: int | None = None
     default_posterior: str | None = None
+    scene_posteriors: tuple[str, ...] = ()
     framing: (
         Callable[[tuple[float, float, float, float]], tuple[float, float, float, float]] | None
     ) = None

@@ -97,6 +97,11 @@ def evaluate_calibration(
             f"{data} was drawn from another parameter space than the estimator's; calibrate on a dataset "
             "of the same model"
         )
+    if dict(dataset.scene_ranges) != dict(estimator.config.scene_ranges or {}):
+        raise UserInputError(
+            f"{data} varies the scene over {dataset.scene_ranges or 'nothing'}, the estimator over "
+            f"{estimator.config.scene_ranges or 'nothing'}; calibrate on a dataset made like its training set"
+        )
     pipeline = estimator_embedder(registry, estimator, device)
     c = estimator.config
     pairs = embed_dataset(
@@ -122,7 +127,7 @@ def evaluate_calibration(
 
     cal = calibrate(
         pairs.theta_unit.astype(np.float64),
-        pairs.x,
+        pairs.conditions,
         _recording(sampler, medians, variances),
         names,
         n_samples=n_samples,

@@ -116,7 +116,7 @@ class EstimatorConfig:
             another embedder (or other weights) apart at inference.
         clip_seconds: Length of the training clips; a shorter target cannot be embedded alike.
         parameters: The parameter space (``ParameterSpace.to_dict()``).
-        x_dim: Embedding dimension ``E``.
+        x_dim: Input dimension: the embedding's ``E``, plus one per ranged scene setting.
         network: The density estimator's settings.
         prior: The prior θ was drawn from; the flow models ``atanh`` of the normalised θ.
         training: How it was trained (dataset, pairs, epochs, losses, seed), informative.
@@ -126,6 +126,10 @@ class EstimatorConfig:
         scene: The scene settings of the training dataset (``dataset generate
             --scene-set``; ``None``: the phenomenon's default scene). A target of another
             scene is not given this estimator's intervals (:meth:`PosteriorEstimator.check_scene`).
+        scene_ranges: ``{name: [low, high]}``: scene settings the training clips varied
+            (``dataset generate --scene-range``); the estimator takes them as inputs after
+            the embedding (:meth:`PosteriorEstimator.condition`) and accepts targets within
+            the ranges. ``None``: trained on one scene.
     """
 
     plugin: str
@@ -150,11 +154,17 @@ class EstimatorConfig:
     frames_option: int | None = None
     weights: str | None = None
     scene: dict[str, Any] | None = None
+    scene_ranges: dict[str, list[float]] | None = None
 
     @property
     def parameter_space(self) -> ParameterSpace:
         """The parameter space θ lives in."""
         return ParameterSpace.from_dict(self.parameters)
+
+    @property
+    def embedding_dim(self) -> int:
+        """``E``: the embedding's share of :attr:`x_dim` (the rest are scene settings)."""
+        return self.x_dim - len(self.scene_ranges or {})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -231,6 +241,22 @@ class PosteriorEstimator:
     def parameter_space(self) -> ParameterSpace:
         """The parameter space θ lives in."""
         return self.config.parameter_space
+
+    def condition(self, embedding: np.ndarray, scene: Mapping[str, Any] | None) -> np.ndarray:
+        """``(x_dim,)`` what to sample at: the embedding, then the ranged scene settings of
+        ``scene`` (a complete scene; only read when the estimator was trained across ranges)."""
+        from physinfer.scene import scene_context
+
+        x = np.asarray(embedding, dtype=np.float32).reshape(-1)
+        ranges = self.config.scene_ranges
+        if not ranges:
+            return x
+        if scene is None or any(name not in scene for name in ranges):
+            raise UserInputError(
+                f"this posterior estimator takes the scene settings {', '.join(sorted(ranges))}; give "
+                "them with --scene-set"
+            )
+        return np.concatenate([x, np.asarray(scene_context(ranges, scene), dtype=np.float32)])
 
     def sample_unit(self, x: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
         """``(n, D)`` posterior samples in normalised coordinates for one embedding ``(E,)``."""
@@ -356,11 +382,28 @@ class PosteriorEstimator:
         Raises:
             UserInputError: naming both scenes and how to get a matching estimator.
         """
-        from physinfer.scene import same_scene, scene_text
+        from physinfer.scene import default_scene, same_scene, scene_text
 
+        ranges = self.config.scene_ranges or {}
+        where = f"{path} " if path else ""
+        if ranges:
+            full = {**default_scene(phenomenon), **(scene or {})}
+            outside = [
+                f"{name}={float(full[name]):g} (trained on {low:g}..{high:g})"
+                for name, (low, high) in sorted(ranges.items())
+                if not low - 1e-9 <= float(full[name]) <= high + 1e-9
+            ]
+            fixed = {k: v for k, v in full.items() if k not in ranges}
+            trained = {k: v for k, v in {**default_scene(phenomenon), **(self.config.scene or {})}.items() if k not in ranges}
+            if not outside and fixed == trained:
+                return
+            why = "; ".join(outside) if outside else f"its other settings were {scene_text(trained)}"
+            raise UserInputError(
+                f"the posterior estimator {where}does not cover this scene ({why}); train one on a "
+                "dataset that does (`physinfer dataset generate --scene-range ...`, then `physinfer posterior train`)"
+            )
         if same_scene(phenomenon, self.config.scene, scene):
             return
-        where = f"{path} " if path else ""
         trained, given = (
             scene_text(s) if not s else f"the scene {scene_text(s)}"
             for s in (self.config.scene, scene)

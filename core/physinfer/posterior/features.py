@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +41,9 @@ class EmbeddedSet:
         x: ``(N, E)`` float32 embeddings.
         sim_ids: ``(N,)`` simulation id of each clip.
         cache: The cache file the pairs came from (or were written to).
+        scene_ranges: The scene settings the dataset varied (``--scene-range``), or ``{}``.
+        context: ``(N, C)`` float32 those settings of each clip
+            (:func:`physinfer.scene.scene_context`; ``C`` = 0 without ranges).
     """
 
     parameter_space: ParameterSpace
@@ -48,9 +51,19 @@ class EmbeddedSet:
     x: np.ndarray
     sim_ids: np.ndarray
     cache: Path
+    scene_ranges: dict[str, list[float]] = field(default_factory=dict)
+    context: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.float32))
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
+
+    @property
+    def conditions(self) -> np.ndarray:
+        """``(N, E + C)`` what the estimator is conditioned on: the embedding, then the
+        ranged scene settings (a dataset of one scene: the embedding alone)."""
+        if self.context.size == 0:
+            return self.x
+        return np.concatenate([self.x, self.context], axis=1).astype(np.float32)
 
     @property
     def theta(self) -> np.ndarray:
@@ -119,7 +132,20 @@ def embed_dataset(
         done_x,
         dataset.sim_ids.copy(),
         final,
+        dict(dataset.scene_ranges),
+        _scene_context(dataset),
     )
+
+
+def _scene_context(dataset: ClipDataset) -> np.ndarray:
+    """``(N, C)`` the ranged scene settings of each clip (``(N, 0)`` without ranges)."""
+    from physinfer.scene import scene_context
+
+    if not dataset.scene_ranges:
+        return np.zeros((len(dataset), 0), dtype=np.float32)
+    return np.array(
+        [scene_context(dataset.scene_ranges, scene) for scene in dataset.scenes], dtype=np.float32
+    ).reshape(len(dataset), len(dataset.scene_ranges))
 
 
 def _read_cached(path: Path, total: int) -> np.ndarray:

@@ -87,11 +87,18 @@ class PosteriorReport:
 
 
 def posterior_of_clip(
-    estimator: PosteriorEstimator, embedder: Any, clip: Any, *, n_samples: int = 5000, seed: int = 0
+    estimator: PosteriorEstimator,
+    embedder: Any,
+    clip: Any,
+    *,
+    n_samples: int = 5000,
+    seed: int = 0,
+    scene: Mapping[str, Any] | None = None,
 ) -> PosteriorReport:
-    """Sample the posterior of one clip and summarise it."""
+    """Sample the posterior of one clip and summarise it; ``scene``: the target's complete
+    scene, which an estimator trained across scene ranges takes as input."""
     t0 = time.perf_counter()
-    x = embed_target(estimator, embedder, clip)
+    x = estimator.condition(embed_target(estimator, embedder, clip), scene)
     t1 = time.perf_counter()
     samples = estimator.sample_unit(x, n_samples, seed=seed)
     t2 = time.perf_counter()
@@ -145,11 +152,11 @@ def infer(
     out = Path(out)
     check_output_dir(out)
     t_start = time.perf_counter()
-    from physinfer.scene import resolve_scene
+    from physinfer.scene import default_scene, resolve_scene
 
     phenomenon = registry.phenomenon(plugin)
     scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
-    estimator, path = load_estimator(registry, plugin, posterior, device)
+    estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
     estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
     if conditioning is not None:
@@ -159,7 +166,12 @@ def infer(
     )
     t_ready = time.perf_counter()
     report = posterior_of_clip(
-        estimator, pipeline.embedder, target.clip, n_samples=n_samples, seed=seed
+        estimator,
+        pipeline.embedder,
+        target.clip,
+        n_samples=n_samples,
+        seed=seed,
+        scene=scene or default_scene(phenomenon),
     )
     report.estimator = path
     report.truth = dict(target.truth) if target.truth else None
@@ -240,16 +252,23 @@ def posterior_for_refinement(
         ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
         phenomenon ships no estimator).
     """
+    from physinfer.scene import default_scene
+
     phenomenon = registry.phenomenon(plugin)
     if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
         return None, None
     try:
-        estimator, path = load_estimator(registry, plugin, posterior, device)
+        estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
         estimator.check_for(plugin, parameter_space, path)
         estimator.check_scene(phenomenon, scene, path)
         pipeline = estimator_embedder(registry, estimator, device)
         report = posterior_of_clip(
-            estimator, pipeline.embedder, clip, n_samples=n_samples, seed=seed
+            estimator,
+            pipeline.embedder,
+            clip,
+            n_samples=n_samples,
+            seed=seed,
+            scene={**default_scene(phenomenon), **(scene or {})},
         )
         pipeline.renderer.close()
     except UserInputError as exc:

@@ -4,7 +4,7 @@ and the ``progress`` callback type they share."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -56,9 +56,19 @@ def check_dataset(dataset: Any, plugin: str) -> None:
 
 
 def load_estimator(
-    registry: Registry, plugin: str, path: Path | None, device: str | None = None
+    registry: Registry,
+    plugin: str,
+    path: Path | None,
+    device: str | None = None,
+    *,
+    scene: Mapping[str, Any] | None = None,
 ) -> tuple[PosteriorEstimator, Path]:
     """The estimator at ``path`` or the phenomenon's shipped one, checked against ``plugin``.
+
+    Without ``path``: the shipped default estimator, or, for a ``scene`` it was not trained
+    on, the first of the phenomenon's ``scene_posteriors`` that covers the scene (the
+    default's refusal is raised when none does). A given ``path`` is not checked against
+    ``scene`` here: callers call :meth:`PosteriorEstimator.check_scene`.
 
     Raises:
         UserInputError: no estimator given and none shipped, or one made for another
@@ -72,10 +82,28 @@ def load_estimator(
                 f"the plugin {plugin!r} ships no posterior estimator; train one with `physinfer posterior "
                 f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
             )
-        path = Path(shipped)
-    estimator = PosteriorEstimator.load(path, device=resolve_device(device))
+        estimator, path = _shipped_for_scene(phenomenon, Path(shipped), scene, resolve_device(device))
+    else:
+        estimator = PosteriorEstimator.load(path, device=resolve_device(device))
     estimator.check_for(plugin, phenomenon.parameter_space, path)
     return estimator, Path(path)
+
+
+def _shipped_for_scene(
+    phenomenon: Any, default: Path, scene: Mapping[str, Any] | None, device: str
+) -> tuple[PosteriorEstimator, Path]:
+    """The first shipped estimator (the default, then ``scene_posteriors``) that covers
+    ``scene``; the default when none does (its refusal is then the caller's to raise)."""
+    others = [Path(p) for p in getattr(phenomenon, "scene_posteriors", ()) or () if Path(p).is_file()]
+    first = PosteriorEstimator.load(default, device=device)
+    for path in [default, *others]:
+        estimator = first if path == default else PosteriorEstimator.load(path, device=device)
+        try:
+            estimator.check_scene(phenomenon, scene, path)
+        except UserInputError:
+            continue
+        return estimator, path
+    return first, default
 
 
 def estimator_embedder(

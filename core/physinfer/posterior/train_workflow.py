@@ -41,6 +41,7 @@ class TrainResult:
             "parameters": [p["name"] for p in c.parameters],
             "training": c.training,
             "scene": c.scene,
+            "scene_ranges": c.scene_ranges,
             "embeddings_cache": str(self.cache),
             "seconds": self.seconds,
         }

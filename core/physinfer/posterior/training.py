@@ -68,7 +68,7 @@ def train_estimator(
     theta = torch.from_numpy(
         to_unbounded(np.asarray(pairs.theta_unit, dtype=np.float64)).astype(np.float32)
     )
-    x = torch.from_numpy(np.asarray(pairs.x, dtype=np.float32))
+    x = torch.from_numpy(np.asarray(pairs.conditions, dtype=np.float32))
     members, runs = [], []
     for k in range(network.ensemble):
         # Member k sees the epochs of those before it: one progress bar over the ensemble.
@@ -95,6 +95,7 @@ def train_estimator(
         parameters=pairs.parameter_space.to_dict(),
         x_dim=int(x.shape[1]),
         network=network,
+        scene_ranges={k: list(v) for k, v in pairs.scene_ranges.items()} or None,
     )
     config = replace(config, training={**config.training, **training})
     trained = PosteriorEstimator(config, estimator.cpu(), "cpu")
