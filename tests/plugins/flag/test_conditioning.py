@@ -92,3 +92,21 @@ def test_an_embedder_the_estimator_was_not_fitted_on_leaves_the_default_camera(w
     clip = read_video(wide_video)
     _, zeta, record = condition_target(pipeline.phenomenon, pipeline.embedder, clip, Conditioning(), {})
     assert zeta == {} and "not estimated" in record["render_estimate"]["note"]
+
+
+def test_a_square_video_keeps_its_framing_but_loses_the_codecs_flicker(tmp_path):
+    """The embedded target written to mp4 as it is: not re-framed, but its background frozen,
+    so the posterior is the render's (before: "not identified", 0-10 m/s, from the flicker)."""
+    from physinfer_flag.phenomenon import default_target
+
+    target = default_target()
+    path = tmp_path / "square.mp4"
+    write_video(path, target.clip)
+    report = pi.infer("flag", target=path, out=tmp_path / "post", samples=500)
+    prepared = report.to_dict()["target_conditions"]["prepared"]
+    assert prepared["skipped"] == "the video is square: taken as framed already"
+    assert prepared["static"]["static_fraction"] > 0.5
+    wind = report.marginals["wind_speed"]
+    assert wind["label"] == "identified"
+    assert wind["ci90"][0] <= target.truth["wind_speed"] <= wind["ci90"][1]
+    assert wind["ci90"][1] - wind["ci90"][0] < 5.0
