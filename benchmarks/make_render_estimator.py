@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from physinfer.plugins import load_registry
-from physinfer.posterior.estimator import embedder_probe
+from physinfer.posterior.fingerprint import embedder_probe
 from physinfer.render_estimate import Z90, fit_render_estimator
 
 #: The ζ components the SDN embedding is sensitive to (benchmarks/bench_zeta_sensitivity.py).

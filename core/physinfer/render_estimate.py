@@ -13,7 +13,7 @@ what ``refine``/``infer`` compute anyway, so an estimate costs one embedding.
 The estimator file is an ``.npz`` (no pickles): ``names`` ``(K,)``, ``mean`` ``(E,)``,
 ``coef`` ``(K, E)``, ``intercept``/``sd``/``prior_sd`` ``(K,)``, ``bounds`` ``(K, 2)``, the
 embedder's name and its fingerprint (``probe``, the embedding of
-:func:`physinfer.posterior.estimator.probe_clip`): an estimator is refused for another
+:func:`physinfer.posterior.fingerprint.probe_clip`): an estimator is refused for another
 embedder or other weights.
 
 Where a phenomenon's estimator is found: ``phenomenon.render_estimator`` (a path; the
@@ -159,7 +159,7 @@ class RenderEstimator:
 
     def check_embedder(self, embedder: Any) -> None:
         """Refuse an embedder whose fingerprint differs from the one it was fitted on."""
-        from physinfer.posterior.estimator import PROBE_TOLERANCE, embedder_probe, probe_mismatch
+        from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
 
         mismatch = probe_mismatch(list(self.probe), embedder_probe(embedder))
         if mismatch > PROBE_TOLERANCE:

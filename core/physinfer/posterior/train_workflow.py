@@ -10,12 +10,8 @@ from typing import Any
 
 from physinfer.errors import UserInputError
 from physinfer.io import check_output_dir
-from physinfer.posterior.estimator import (
-    NetworkConfig,
-    PosteriorEstimator,
-    embedder_probe,
-    resolve_device,
-)
+from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator, resolve_device
+from physinfer.posterior.fingerprint import embedder_probe
 from physinfer.posterior.loading import ProgressFn, build_embedder, check_dataset, no_progress
 from physinfer.registry import Registry
 
