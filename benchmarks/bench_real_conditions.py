@@ -17,7 +17,10 @@ embedding from the clean render's (squared distance; 1 m/s of wind moves it 0.11
 Prints one JSON object (per condition: median wind error of the posterior median, share
 within 0.5 m/s, 90 % coverage, ζ estimate errors, embedding shift) and a table on stderr.
 Every prepared condition is reported as ``prepare`` ships (the static background frozen)
-and ``(no freeze)``. The default (6 targets) takes about 20 min on the busy 2-core machine;
+and ``(no freeze)``. ``--sizes``: targets whose flag length and height are drawn too
+(log-uniform over the shipped sizes estimator's ranges, 0.9-3 m × 0.6-2 m), simulated in
+that scene and inferred with the estimator ``infer --scene-set`` picks, given the size; a
+few conditions (``SIZE_CONDITIONS``). The default (6 targets) takes about 20 min on the busy 2-core machine;
 ``--quick`` (1 target, 4 conditions) about a minute.
 """
 
@@ -54,22 +57,36 @@ from physinfer.loop import squared_distance  # noqa: E402
 from physinfer.types import Clip, Trajectory  # noqa: E402
 
 THETA_SEED, SIM_SEED = 300_000, 400_000
+#: The flag sizes ``--sizes`` draws (the shipped sizes estimator's ranges).
+SIZE_RANGES = {"flag_length": (0.9, 3.0), "flag_height": (0.6, 2.0)}
+SIZE_CONDITIONS = (
+    "clean (oracle framing)",
+    "clean → prepare",
+    "H.264 CRF 35",
+    "1920×1080 off-centre",
+    "phone (all, 1080p 30 fps)",
+)
 SIM_FPS, FRAMES_25 = 300.0, 60
 STEP = {25: 12, 30: 10, 50: 6, 60: 5}
 
 
-def make_target(phenomenon: Any, renderer: Any, index: int) -> dict[str, Any]:
-    """θ, ζ and the 300-fps trajectory of held-out target ``index``."""
+def make_target(phenomenon: Any, renderer: Any, index: int, sized: bool = False) -> dict[str, Any]:
+    """θ, ζ (and with ``sized`` the flag's size) and the 300-fps trajectory of held-out target ``index``."""
+    from physinfer.scene import default_scene, sample_scene
+    from physinfer_flag.phenomenon import scene_config
     from physinfer_flag.simulator import make_simulator
 
     space = phenomenon.parameter_space
     rng = np.random.default_rng(THETA_SEED + index)
     truth = space.from_unit(rng.uniform(-1.0, 1.0, len(space)))
     zeta = renderer.sample_render_params(rng)
-    simulator = make_simulator(fps=SIM_FPS, n_frames=FRAMES_25 * 12)
+    scene = {**default_scene(phenomenon), **sample_scene(rng, SIZE_RANGES)} if sized else None
+    config = scene_config(scene) if scene else {}
+    simulator = make_simulator(fps=SIM_FPS, n_frames=FRAMES_25 * 12, **config)
     return {
         "truth": truth,
         "zeta": zeta,
+        "scene": scene,
         "trajectory": simulator.simulate(truth, seed=SIM_SEED + index),
         "rng": rng,
     }
@@ -138,16 +155,25 @@ UNFROZEN = " (no freeze)"
 
 
 def evaluate(
-    clip: Clip, truth: dict[str, float], zeta: dict[str, Any], ctx: dict[str, Any], seed: int
+    clip: Clip,
+    truth: dict[str, float],
+    zeta: dict[str, Any],
+    ctx: dict[str, Any],
+    seed: int,
+    scene: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Posterior of ``clip`` (embedding, samples), its wind error and the ζ estimate."""
     from physinfer.posterior.summary import marginals
     from physinfer.posterior.workflow import embed_target
 
     x = embed_target(ctx["estimator"], ctx["embedder"], clip)
-    samples = ctx["estimator"].sample_unit(x, 2000, seed=seed)
+    samples = ctx["estimator"].sample_unit(ctx["estimator"].condition(x, scene), 2000, seed=seed)
     wind = marginals(samples, ctx["estimator"].parameter_space)["wind_speed"]
-    zest = ctx["render_estimator"].estimate(x)["values"]
+    try:
+        zest = ctx["render_estimator"].estimate(x)["values"]
+    except UserInputError:  # fitted on another embedder's embeddings than the posterior's
+        nan = float("nan")
+        zest = {"camera_azimuth_deg": nan, "camera_elevation_deg": nan, "framing": nan}
     return {
         "embedding": x,
         "wind_median": float(wind["median"]),
@@ -161,12 +187,14 @@ def evaluate(
 
 
 def run_target(index: int, ctx: dict[str, Any], quick: bool) -> list[dict[str, Any]]:
-    target = make_target(ctx["phenomenon"], ctx["renderer"], index)
+    target = make_target(ctx["phenomenon"], ctx["renderer"], index, sized=ctx["sized"])
     rows, clean_x = [], None
     settings = PrepareSettings(size=ctx["embedder"].size, fps=ctx["embedder"].fps)
     unfrozen = replace(settings, freeze_background=False)
     for name, make in conditions(target, ctx["renderer"], seed=THETA_SEED + index).items():
         if quick and name not in ctx["quick_conditions"]:
+            continue
+        if ctx["sized"] and name not in SIZE_CONDITIONS:
             continue
         t0 = time.perf_counter()
         clip, prepare = make()
@@ -175,6 +203,7 @@ def run_target(index: int, ctx: dict[str, Any], quick: bool) -> list[dict[str, A
             "target": index,
             "condition": name,
             "truth_wind": target["truth"]["wind_speed"],
+            **({"scene": target["scene"]} if target["scene"] else {}),
         }
         try:
             variants = {name: clip}
@@ -187,7 +216,7 @@ def run_target(index: int, ctx: dict[str, Any], quick: bool) -> list[dict[str, A
                 row["static_background"] = prepared.static
             t2 = time.perf_counter()
             for label, c in variants.items():
-                result = evaluate(c, target["truth"], target["zeta"], ctx, seed=index)
+                result = evaluate(c, target["truth"], target["zeta"], ctx, seed=index, scene=target["scene"])
                 x = result.pop("embedding")
                 if label == "clean (oracle framing)":
                     clean_x = x
@@ -240,9 +269,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             "within_0.5": float(np.mean(err <= 0.5)),
             "coverage90": float(np.mean([r["covered90"] for r in done])),
             "median_ci90_width": float(np.median([r["ci90_width"] for r in done])),
-            "median_azimuth_error": float(np.median([r["azimuth_error"] for r in done])),
-            "median_elevation_error": float(np.median([r["elevation_error"] for r in done])),
-            "median_framing_estimate": float(np.median([r["framing_estimate"] for r in done])),
+            "median_azimuth_error": float(np.nanmedian([r["azimuth_error"] for r in done])),
+            "median_elevation_error": float(np.nanmedian([r["elevation_error"] for r in done])),
+            "median_framing_estimate": float(np.nanmedian([r["framing_estimate"] for r in done])),
             "median_embedding_shift": float(np.median(shifts)) if shifts else None,
             "median_moved": float(
                 np.median(
@@ -289,6 +318,9 @@ def main() -> None:
     parser.add_argument(
         "--rows", type=Path, default=None, help="also write every row to this JSON file"
     )
+    parser.add_argument(
+        "--sizes", action="store_true", help="flags of drawn sizes, the sizes estimator, a few conditions"
+    )
     args = parser.parse_args()
 
     from physinfer.plugins import load_registry
@@ -298,7 +330,14 @@ def main() -> None:
     start = time.perf_counter()
     registry, _ = load_registry()
     phenomenon = registry.phenomenon("flag")
-    estimator, path = load_estimator(registry, "flag", None, "cpu")
+    if args.sizes:  # the estimator infer picks for a flag of another size (any in the ranges)
+        from physinfer.scene import default_scene
+
+        other = {**default_scene(phenomenon), "flag_length": 2.0, "flag_height": 1.3}
+        estimator, path = load_estimator(registry, "flag", None, "cpu", scene=other)
+        estimator.check_scene(phenomenon, other, path)
+    else:
+        estimator, path = load_estimator(registry, "flag", None, "cpu")
     pipeline = estimator_embedder(registry, estimator, "cpu")
     ctx = {
         "phenomenon": phenomenon,
@@ -306,6 +345,7 @@ def main() -> None:
         "embedder": pipeline.embedder,
         "estimator": estimator,
         "render_estimator": RenderEstimator.load(render_estimator_path(phenomenon)),
+        "sized": args.sizes,
         "quick_conditions": (
             "clean (oracle framing)",
             "clean → prepare",

@@ -14,9 +14,9 @@ benchmark measures, on targets of other sizes (``--sizes``, default 0.9 × 0.6 m
   for the target's scene (the one trained across sizes where it covers the size, with the
   size as input), and of the 1.5 m estimator, as ``infer`` would report it if nothing
   refused it.
-- **refinement**: ``refine --steps N`` of each target with ``--scene-set`` of its size (the
-  shipped posterior is then not used, so the search starts at the centre) and without it
-  (the default 1.5 m flag, posterior warm start): the best fit's wind error.
+- **refinement**: ``refine --steps N`` of each target (its mp4, conditioned as the CLI does)
+  with ``--scene-set`` of its size (from the estimator that covers the size) and without it
+  (the default 1.5 m flag and estimator): the best fit's wind error.
 
 Usage: ``PYOPENGL_PLATFORM=egl nice -n 10 python benchmarks/bench_scene_sizes.py --steps 16``.
 Prints one JSON object.
@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physinfer.conditioning import Conditioning
 from physinfer.loop import squared_distance
 from physinfer.plugins import load_registry
 from physinfer.roles import Target
@@ -166,7 +167,7 @@ def run(args: argparse.Namespace) -> dict:
                 result = refine(
                     registry, plugin="flag", target_path=video, truth=[f"wind_speed={wind}"], steps=args.steps,
                     seed=0, out=work / f"run_{video.stem}_{label}", progress=False, noise_samples=0,
-                    floor_samples=0, scene_set=scene, device="cpu",
+                    floor_samples=0, scene_set=scene, device="cpu", conditioning=Conditioning(),
                 )  # fmt: skip
                 row[label] = {
                     "wind": result.best_params["wind_speed"],
