@@ -179,9 +179,15 @@ def test_the_shipped_estimator_for_a_scene_is_the_first_that_covers_it(ranged_es
     small = {**default_scene(flag), "flag_length": 0.6, "flag_height": 0.4}
     assert _shipped_for_scene(record, default, small, "cpu")[1] == ranged_estimator
     assert _shipped_for_scene(record, default, None, "cpu")[1] == default
-    # A scene nobody covers gets the default, whose refusal the caller raises.
+    # A scene nobody covers: the default's refusal, with what the others cover.
     large = {**default_scene(flag), "flag_length": 3.5}
-    assert _shipped_for_scene(record, default, large, "cpu")[1] == default
+    with pytest.raises(UserInputError) as refused:
+        _shipped_for_scene(record, default, large, "cpu")
+    assert "trained on clips of the default scene, not of the scene flag_length=3.5" in str(refused.value)
+    assert "sizes.safetensors covers flag_height 0.3..0.45, flag_length 0.5..0.7" in str(refused.value)
+    # Without scene estimators the default comes back; its refusal is the caller's to raise.
+    alone = replace(flag, scene_posteriors=())
+    assert _shipped_for_scene(alone, default, large, "cpu")[1] == default
 
 
 def test_pairs_without_ranges_condition_on_the_embedding_alone():

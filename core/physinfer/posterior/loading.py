@@ -93,17 +93,34 @@ def _shipped_for_scene(
     phenomenon: Any, default: Path, scene: Mapping[str, Any] | None, device: str
 ) -> tuple[PosteriorEstimator, Path]:
     """The first shipped estimator (the default, then ``scene_posteriors``) that covers
-    ``scene``; the default when none does (its refusal is then the caller's to raise)."""
+    ``scene``; the default when none is shipped for other scenes (its refusal is then the
+    caller's to raise).
+
+    Raises:
+        UserInputError: scene estimators are shipped but none covers ``scene``: the
+            default's refusal, with what the others cover.
+    """
     others = [Path(p) for p in getattr(phenomenon, "scene_posteriors", ()) or () if Path(p).is_file()]
     first = PosteriorEstimator.load(default, device=device)
+    refusals: list[str] = []
     for path in [default, *others]:
         estimator = first if path == default else PosteriorEstimator.load(path, device=device)
         try:
             estimator.check_scene(phenomenon, scene, path)
-        except UserInputError:
+        except UserInputError as exc:
+            refusals.append(str(exc) if path == default else _coverage(estimator, path))
             continue
         return estimator, path
-    return first, default
+    if not others:
+        return first, default
+    raise UserInputError(f"{refusals[0]} (the plugin's other shipped estimators: {'; '.join(refusals[1:])})")
+
+
+def _coverage(estimator: PosteriorEstimator, path: Path) -> str:
+    """``posterior_sizes.safetensors covers flag_height 0.6..2, flag_length 0.9..3``."""
+    ranges = estimator.config.scene_ranges or {}
+    spans = ", ".join(f"{name} {low:g}..{high:g}" for name, (low, high) in sorted(ranges.items()))
+    return f"{path.name} covers {spans or 'its own scene only'}"
 
 
 def estimator_embedder(
