@@ -371,3 +371,56 @@ def test_effect_tasks_run_elsewhere_give_the_limits_of_one_process(pendulum):
     for name in ("quadratic_drag", "hum"):
         assert there["effects"][name] == here["effects"][name], name
     assert there["simulations"] == here["simulations"]
+
+
+def test_a_ladder_that_fails_on_a_worker_runs_here_with_the_same_limits(pendulum):
+    """A worker that dies (or cannot rebuild the model) loses no limit: ``limit_runner`` says
+    which ladder failed and hands it back as ``None``, and ``detection_limits`` runs it here,
+    beside the ladders that came back, to the limits of one process."""
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+    from types import SimpleNamespace
+
+    from pendulum_example.physics import QuadraticDrag
+
+    from physinfer.discrepancy.limits import effect_ladder
+    from physinfer.discrepancy.parallel import limit_runner
+    from physinfer.embedders import GridSpectrumEmbedder
+
+    effect_sims = [("quadratic_drag", _jittery(0.1, 20, [QuadraticDrag()])), ("hum", _jittery(0.1, 20, [Hum()]))]
+    args = (pendulum, _jittery(0.1, 20), effect_sims, GridSpectrumEmbedder(n_frames=20))
+    here = _limits(*args, fractions=(0.5, 1.0))
+
+    class DyingExecutor:
+        def submit(self, fn, job):
+            future = Future()
+            future.set_exception(BrokenProcessPool(f"the worker running {job.task.name} died"))
+            return future
+
+    pool = SimpleNamespace(
+        size=2, settings=SimpleNamespace(limit_config=SimpleNamespace(reveal=False)),
+        where=lambda: "2 test workers", executor=DyingExecutor,
+    )  # fmt: skip
+    said: list[str] = []
+    failed = _limits(*args, fractions=(0.5, 1.0), runner_for=lambda _: limit_runner(pool, {"size": 48}, said.append))
+    assert "      hum's ladder failed on a worker (BrokenProcessPool: the worker running hum died); running it here" in said
+
+    def drag_there_hum_lost(inputs):
+        def run(tasks):
+            probe = Probe(inputs.base, inputs.render_params)
+            out = []
+            for task in tasks:
+                if task.name == "hum":
+                    out.append(None)
+                    continue
+                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
+                out.append((limit, ladder, probe.simulations))
+            return out
+
+        return run
+
+    mixed = _limits(*args, fractions=(0.5, 1.0), runner_for=drag_there_hum_lost)
+    for result in (failed, mixed):
+        for name in ("quadratic_drag", "hum"):
+            assert result["effects"][name] == here["effects"][name], name
+        assert result["simulations"] == here["simulations"]
