@@ -22,8 +22,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from physinfer.errors import UserInputError
 from physinfer.types import Clip
 
@@ -103,10 +101,7 @@ def freeze_background(clip: Clip) -> tuple[Clip, dict[str, Any]]:
     """
     from physinfer.static_background import freeze_static
 
-    frames = np.asarray(clip.frames)
-    if frames.dtype != np.uint8 or frames.ndim != 4:
-        return clip, {"skipped": f"frames of {frames.dtype} {frames.shape}, not (T, H, W, C) uint8"}
-    frozen, static = freeze_static(frames)
+    frozen, static = freeze_static(clip.frames)  # a Clip's frames are (T, H, W, C) uint8
     return Clip(frozen, clip.fps), static
 
 

@@ -138,9 +138,10 @@ def _generate(
 
     registry, _infos = load_registry()
     phenomenon = registry.phenomenon(plugin)
-    scene = resolve_scene(phenomenon, parse_scene_set(scene_set))
+    given = parse_scene_set(scene_set)
+    scene = resolve_scene(phenomenon, given)
     ranges = parse_scene_ranges(phenomenon, scene_range)
-    both = sorted(set(ranges) & set(parse_scene_set(scene_set)))
+    both = sorted(set(ranges) & set(given))
     if both:
         raise UserInputError(f"{', '.join(both)}: given both --scene-set and --scene-range; give one")
     generator = generator_for(bind_scene(phenomenon, scene), scene_ranges=ranges)

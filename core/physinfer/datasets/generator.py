@@ -174,8 +174,9 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
     def in_scene(self, scene: Mapping[str, float]) -> PhenomenonDatasetGenerator:
         """This generator with its record bound to the record's scene updated by ``scene``.
 
-        The last scene's generator is kept (a unit's simulation is rendered right after it
-        is simulated); the one before it is closed, so renderers do not pile up.
+        Only the last scene's generator is kept (each simulation has a scene of its own),
+        the one before it closed, so renderers do not pile up; a simulation's renders
+        follow one another and share it.
         """
         import json
 

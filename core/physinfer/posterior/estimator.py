@@ -349,14 +349,15 @@ class PosteriorEstimator:
         ranges = self.config.scene_ranges or {}
         where = f"{path} " if path else ""
         if ranges:
-            full = {**default_scene(phenomenon), **(scene or {})}
+            defaults = default_scene(phenomenon)
+            full = {**defaults, **(scene or {})}
             outside = [
                 f"{name}={float(full[name]):g} (trained on {low:g}..{high:g})"
                 for name, (low, high) in sorted(ranges.items())
                 if not low - 1e-9 <= float(full[name]) <= high + 1e-9
             ]
             fixed = {k: v for k, v in full.items() if k not in ranges}
-            trained = {k: v for k, v in {**default_scene(phenomenon), **(self.config.scene or {})}.items() if k not in ranges}
+            trained = {k: v for k, v in {**defaults, **(self.config.scene or {})}.items() if k not in ranges}
             if not outside and fixed == trained:
                 return
             why = "; ".join(outside) if outside else f"its other settings were {scene_text(trained)}"

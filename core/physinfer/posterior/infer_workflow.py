@@ -246,7 +246,8 @@ def posterior_for_refinement(
     target shorter than its clips) is the user's error. Without it, the phenomenon's shipped
     estimator is used when it applies; when it does not (effects switched in, parameters
     held by ``--fix``, a short target, another ``scene`` than its training clips') the
-    refinement goes on without it and the reason is returned instead.
+    refinement goes on without it and the reason is returned instead. ``scene``: the
+    complete scene (:func:`physinfer.scene.resolve_scene`), ``None`` for the default.
 
     Returns:
         ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
@@ -268,7 +269,7 @@ def posterior_for_refinement(
             clip,
             n_samples=n_samples,
             seed=seed,
-            scene={**default_scene(phenomenon), **(scene or {})},
+            scene=scene or default_scene(phenomenon),
         )
         pipeline.renderer.close()
     except UserInputError as exc:
