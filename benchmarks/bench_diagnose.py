@@ -192,14 +192,15 @@ def case_dir_of(plugin: str, hidden: str | None, seed: int, out: str, strength: 
 
 def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespace,
              strength: float | None = None, workers: int | None = 1, subdir: str = "diagnosis",
-             calibrate_all: bool | None = None) -> dict[str, Any]:
+             calibrate_all: bool | None = None, screen: bool | None = None) -> dict[str, Any]:
     """Make one target and diagnose it in ``<case>/<subdir>``; the row is also written to
     ``<subdir>``'s ``case.json`` (``case.json`` for the default ``diagnosis``).
 
     ``workers``: processes running the stages after the baseline (1: all in this one, as
     the stored tables were made; the decisions do not depend on it). ``calibrate_all``:
     refine every self-consistency run (``None``: ``--calibrate-all``); the decisions do not
-    depend on it either."""
+    depend on it either. ``screen``: screen the candidates before refining them (``None``:
+    unless ``--no-screen``); a screened-out candidate is recorded as not significant."""
     import functools
 
     from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
@@ -242,6 +243,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             calibration_control=not args.no_calibration_control,
             videos=False,
             limits=not args.no_limits,
+            screen=not args.no_screen if screen is None else screen,
             workers=workers,
             registry_factory=functools.partial(load_bench_registry, args.frames),
         ),
@@ -270,13 +272,18 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             c["effect"]: {"gap": c["gap"], "ratio": c["ratio"], "p_value": c["p_value"], "significant": c["significant"],
                           "checks": c["checks"], "effect_params": c["effect_params"]}
             for c in report["candidates"]
+        } | {
+            c["effect"]: {"gap": None, "ratio": None, "p_value": None, "significant": False, "screened": c["reason"]}
+            for c in report.get("screened") or []
         },
         "truth": truth,
         "fixed": report["settings"]["fixed"],
         "strength": strength,
         "limits": {c["effect"]: {"detectable_from": c.get("detectable_from"),
                                  "fraction": c.get("limit", {}).get("fraction"),
-                                 "reason": c.get("limit", {}).get("reason")} for c in report["candidates"]},
+                                 "reason": c.get("limit", {}).get("reason")} for c in report["candidates"]}
+        | {c["effect"]: {"detectable_from": None, "fraction": None, "reason": c["reason"]}
+           for c in report.get("screened") or []},
         "limit_cost": report.get("limits"),
         "wall_time_s": time.perf_counter() - t0,
         "timing": report.get("timing"),
@@ -285,11 +292,13 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     return row
 
 
-#: ``--timing-modes``: name → (workers: "one" or "K" for --workers, refine every self-consistency run).
+#: ``--timing-modes``: name → (workers: "one" or "K" for --workers, refine every self-consistency
+#: run, screen the candidates first).
 TIMING_MODES = {
-    "w1-all": ("one", True),  # every stage in one process, as the stored tables were made
-    "all": ("K", True),  # the stages side by side on K workers (the code of 2026-11-24 morning)
-    "needed": ("K", False),  # side by side, only the self-consistency runs the decisions need
+    "w1-all": ("one", True, False),  # every stage in one process, as the stored tables were made
+    "all": ("K", True, False),  # the stages side by side on K workers (the code of 2026-11-24 morning)
+    "needed": ("K", False, False),  # side by side, only the self-consistency runs the decisions need
+    "screened": ("K", False, True),  # ... and the candidates no fit could name left out (the default)
 }
 
 
@@ -305,15 +314,16 @@ def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]
     for hidden, seed in all_cases:
         runs = {}
         for mode in modes:
-            where, every = TIMING_MODES[mode]
+            where, every, screen = TIMING_MODES[mode]
             workers = 1 if where == "one" else k
             # The directory names of the first version of this benchmark, so its runs are reused.
-            subdir = f"timing-w{workers}" + ("" if every else "-needed")
+            subdir = f"timing-w{workers}" + ("" if every else "-needed") + ("-screened" if screen else "")
             stored = case_dir_of(args.plugin, hidden, seed, args.out) / f"case-{subdir}.json"
             if args.timing_reuse and stored.is_file():  # a mode measured by an earlier invocation
                 runs[mode] = json.loads(stored.read_text())
                 continue
-            runs[mode] = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=subdir, calibrate_all=every)
+            runs[mode] = run_case(args.plugin, hidden, seed, args, workers=workers, subdir=subdir, calibrate_all=every,
+                                  screen=screen)
             print(json.dumps({"hidden": hidden, "seed": seed, "mode": mode, "named": runs[mode]["named"],
                               "misspecified": runs[mode]["misspecified"],
                               "wall_time_s": round(runs[mode]["wall_time_s"], 1)}), file=sys.stderr, flush=True)
@@ -565,6 +575,9 @@ def main() -> None:
                         help="with --merge: each case's decisions under earlier calibrations and rules (from its stored gaps)")
     parser.add_argument("--no-null", action="store_true", help="skip the no-effect targets")
     parser.add_argument("--no-limits", action="store_true", help="diagnose without the detection limits")
+    parser.add_argument("--no-screen", action="store_true",
+                        help="refine every candidate (default: screen out those no fit could name; --timing modes "
+                             "say for themselves)")
     parser.add_argument("--power", action="store_true",
                         help="power curves: each hidden effect at --strengths (fractions of the way from off to the "
                              "far end of its range; 0 is a clean target) for --seeds seeds; the named-rate per "
@@ -583,7 +596,7 @@ def main() -> None:
                         help="diagnose each case twice, in one process and with --workers; wall times and "
                              "whether the decisions agree (exit 1 if any differs)")
     parser.add_argument("--workers", type=int, default=None, help="with --timing: processes K (default: CPUs)")
-    parser.add_argument("--timing-modes", nargs="+", choices=sorted(TIMING_MODES), default=["all", "needed"],
+    parser.add_argument("--timing-modes", nargs="+", choices=sorted(TIMING_MODES), default=["needed", "screened"],
                         help="with --timing: the modes, before first (w1-all: one process, every self-consistency "
                              "run; all: K workers, every run; needed: K workers, the runs the decisions need)")
     parser.add_argument("--calibrate-all", action="store_true",

@@ -276,6 +276,7 @@ def diagnose(
         videos=not o.no_video,
         limits=o.limits,
         limit_config=LimitConfig(reveal=o.reveal),
+        screen=o.screen,
         scene_set=dict(o.scene_set),
         conditioning=o.conditioning(),  # framing a wide video; ζ stays the default or --render-set
         workers=o.workers,

@@ -187,6 +187,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         no_video: Skip the side-by-side video.
         limits: Estimate each effect's detection limit from a ladder of simulations.
         reveal: Also measure whether another view or a longer clip would lower the limits.
+        screen: Leave out, before refining them, the candidates whose signature no fit could
+            name on this target (:mod:`physinfer.discrepancy.screen`); ``False``: refine all.
         workers: Local worker processes running the stages after the baseline side by side
             (``None``: one per CPU; 0 or 1: in this process).
         scheduler: A Dask scheduler address whose workers run those stages.
@@ -205,6 +207,7 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
     no_video: bool = False
     limits: bool = True
     reveal: bool = False
+    screen: bool = True
     workers: int | None = None
     scheduler: str | None = None
 

@@ -89,6 +89,8 @@ class Diagnosis:
         gap_after: The gap with the named effect (the baseline's when none is named).
         candidates: One dict per effect tried (gap, ratio, p-value, significance, ...).
         out: The diagnosis directory.
+        screened: The effects left out before refinement, each with its ``reason`` (no fit
+            could name them on this target; see :mod:`physinfer.discrepancy.screen`).
         report: Everything ``diagnosis.json`` holds.
     """
 
@@ -99,6 +101,7 @@ class Diagnosis:
     candidates: list[dict[str, Any]]
     out: Path
     report: dict[str, Any]
+    screened: list[dict[str, Any]] = field(default_factory=list)
 
     @classmethod
     def from_report(cls, report: dict[str, Any], out: Path) -> Diagnosis:
@@ -111,6 +114,7 @@ class Diagnosis:
             candidates=list(report.get("candidates", [])),
             out=Path(out),
             report=report,
+            screened=list(report.get("screened") or []),
         )
 
     def to_dict(self) -> dict[str, Any]:

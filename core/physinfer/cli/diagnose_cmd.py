@@ -128,6 +128,14 @@ def diagnose_cmd(
             "(chaotic phenomena; re-renders and re-simulates the ladder).",
         ),
     ] = False,
+    screen: Annotated[
+        bool,
+        typer.Option(
+            "--screen/--no-screen",
+            help="Before refining the effects, leave out those whose signature at the baseline's fit no fit "
+            "could name (a ladder of simulations; chaotic phenomena only). --no-screen refines every effect.",
+        ),
+    ] = True,
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
@@ -187,6 +195,8 @@ def diagnose_cmd(
             )
         if note := limits_scale_note(report):
             err_console.print(f"  ({note})", highlight=False)
+    for c in report.get("screened") or []:
+        err_console.print(f"  {c['effect']}: screened out, not refined ({c['reason']})", highlight=False)
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 

@@ -158,20 +158,29 @@ def misspecification(gap: float, scale: float, rule: DecisionRule) -> dict[str, 
     }
 
 
-def final_verdict(gap_verdict: dict[str, Any], candidates: Sequence[dict[str, Any]], rule: DecisionRule) -> dict[str, Any]:
+def final_verdict(
+    gap_verdict: dict[str, Any],
+    candidates: Sequence[dict[str, Any]],
+    rule: DecisionRule,
+    n_candidates: int | None = None,
+) -> dict[str, Any]:
     """Combine the gap test with the effect test (see the module docstring).
 
     Args:
         gap_verdict: :func:`misspecification`'s result.
         candidates: Every candidate with its ``significant`` decision and ``p_value``.
         rule: Thresholds; ``effect_evidence`` switches the effect test on.
+        n_candidates: The Bonferroni divisor (``None``: ``len(candidates)``); a diagnosis
+            that screened some candidates out still counts them
+            (:mod:`physinfer.discrepancy.screen`).
 
     Returns:
         ``gap_verdict`` with ``gap_test`` (its own ``misspecified``), ``evidence`` (the
         tests that found the model misspecified: ``"gap"``, ``"effect"``) and the final
         ``misspecified``.
     """
-    level = rule.alpha / max(len(candidates), 1)  # Bonferroni over the candidates
+    tried = len(candidates) if n_candidates is None else n_candidates
+    level = rule.alpha / max(tried, 1)  # Bonferroni over the candidates
     by_effect = rule.effect_evidence and any(c["significant"] and c["p_value"] < level for c in candidates)
     evidence = [name for name, hit in (("gap", gap_verdict["misspecified"]), ("effect", by_effect)) if hit]
     return {**gap_verdict, "gap_test": bool(gap_verdict["misspecified"]), "evidence": evidence,

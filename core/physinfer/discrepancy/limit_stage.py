@@ -30,11 +30,12 @@ def diagnosis_simulations(
     results: Sequence[RefineResult],
     calibration_runs: int,
     n_gaps: int,
+    unrefined: int = 0,
 ) -> int:
-    """Simulations a diagnosis costs with all its ``calibration_runs`` (the ladder's budget:
-    a share of this, whether or not the runs were needed; trials, selection re-simulations,
-    gap measurements)."""
-    stages = len(results) + calibration_runs * (2 if settings.calibration_control else 1)
+    """Simulations a diagnosis costs with all its ``calibration_runs`` and its ``unrefined``
+    (screened-out) candidates (the ladder's budget: a share of this, whether or not the runs
+    were needed or the candidates refined; trials, selection re-simulations, gap measurements)."""
+    stages = len(results) + unrefined + calibration_runs * (2 if settings.calibration_control else 1)
     per_stage_trials = sum(r.n_trials for r in results) / max(len(results), 1)
     steps = settings.steps or per_stage_trials
     effect_steps = settings.effect_steps or steps
@@ -44,6 +45,7 @@ def diagnosis_simulations(
     select = settings.select_top * settings.select_seeds * stages
     return int(
         sum(r.n_trials for r in results)
+        + unrefined * effect_steps
         + calibration_trials
         + select
         + n_gaps * settings.floor_samples
@@ -62,11 +64,14 @@ def run_limits(
     say: Log,
     pool: WorkerPool | None = None,
     scale_low: float | None = None,
+    n_candidates: int | None = None,
 ) -> dict[str, Any]:
     """Every candidate's detection limit at the best baseline fit, cached in ``limits.json``;
     the effects' ladders side by side on ``pool`` when it has workers. ``scale_low``: where
     the null scale is only known as a range (``scale`` its upper end), its lower end, at
-    which each limit is read again from the same ladder (``at_lower_scale``)."""
+    which each limit is read again from the same ladder (``at_lower_scale``).
+    ``n_candidates``: the candidates the rule counts, screened-out ones included (``None``:
+    ``effect_objs``)."""
     import dataclasses
     import json
 
@@ -83,6 +88,7 @@ def run_limits(
         "seed": settings.seed,
         "rule": dataclasses.asdict(settings.rule),
         "floor_samples": settings.floor_samples,
+        **({"n_candidates": n_candidates} if n_candidates is not None else {}),
     }
     path = settings.out / "limits.json"
     if path.is_file():
@@ -131,6 +137,7 @@ def run_limits(
         diagnosis_simulations=n_sims,
         make_longer=make_longer,
         scale_low=scale_low,
+        n_candidates=n_candidates,
     )
     from physinfer.discrepancy.parallel import limit_runner
 

@@ -136,6 +136,8 @@ class LimitInputs:
         floor_samples: ``K``.
         seed: The diagnosis seed (the ladder's seeds are derived from it).
         diagnosis_simulations: Simulations the diagnosis cost (for the budget).
+        n_candidates: Candidates the rule counts when some are not in ``augmented`` (screened
+            out: :mod:`physinfer.discrepancy.screen`); ``None``: those in ``augmented``.
         make_longer: ``None``, or a factory that, given the current clip's seconds, returns
             ``(base simulator, {effect: simulator}, embedder)`` recording twice as long (the
             longer-clip what-if); it raises :class:`UserInputError` where the phenomenon
@@ -154,6 +156,12 @@ class LimitInputs:
     diagnosis_simulations: int
     make_longer: Callable[[float], tuple[Any, dict[str, Any], Any]] | None = None
     scale_low: float | None = None
+    n_candidates: int | None = None
+
+    @property
+    def candidates(self) -> int:
+        """The candidates the rule counts: ``n_candidates``, or those in ``augmented``."""
+        return len(self.augmented) if self.n_candidates is None else self.n_candidates
 
 
 def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -> int:
@@ -163,7 +171,7 @@ def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -
     n_params, rungs, effects = (
         len(inputs.base.simulator.parameter_space),
         len(config.fractions),
-        len(inputs.augmented),
+        inputs.candidates,
     )
     n = config.seeds
     while (
@@ -260,7 +268,7 @@ def detection_limits(
     def thresholds_at(scale: float) -> dict[str, Threshold]:
         return {
             name: Threshold.of(
-                scale, len(pipeline.effects[0].parameter_space), inputs.rule, len(inputs.augmented),
+                scale, len(pipeline.effects[0].parameter_space), inputs.rule, inputs.candidates,
                 inputs.floor_samples,
             )  # fmt: skip
             for name, pipeline in inputs.augmented.items()

@@ -145,7 +145,7 @@ def run_job(job: StageJob) -> dict[str, float]:
     """Run one job in this (worker) process; the seconds each of its stages took."""
     from physinfer.threads import refinement_torch_threads, torch_threads
 
-    registry, base = _worker_pipeline(job.settings)
+    registry, base = worker_pipeline(job.settings)
     common = {"registry": registry, "settings": job.settings}
     gaps = GapContext(job.target, job.target_embedding, job.seeds, job.settings.out)
     start = time.perf_counter()
@@ -171,7 +171,7 @@ def run_job(job: StageJob) -> dict[str, float]:
     return {job.stages[0][0]: time.perf_counter() - start}
 
 
-def _worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
+def worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
     """The registry and baseline model of ``settings`` in this worker thread, built once."""
     key = (
         settings.plugin, settings.embedder, str(settings.weights), settings.device, settings.duration_s,
@@ -236,7 +236,7 @@ class WorkerPool:
     """The worker processes of one diagnosis, started at their first job and kept until it
     ends, so each round of jobs (the stages after the baseline, the self-consistency runs
     asked for later, the detection limits' ladders) does not pay again for the processes'
-    start: the imports and each worker's model (:func:`_worker_pipeline` keeps it).
+    start: the imports and each worker's model (:func:`worker_pipeline` keeps it).
 
     Args:
         settings: The diagnosis settings (``workers``, ``scheduler``).
@@ -379,7 +379,7 @@ def run_limit_job(job: LimitJob) -> tuple[dict[str, Any], Any, int]:
     from physinfer.session import fixed_by_user
     from physinfer.threads import refinement_torch_threads, torch_threads
 
-    registry, base = _worker_pipeline(job.settings)
+    registry, base = worker_pipeline(job.settings)
     effect = registry.effect(job.task.name, phenomenon=base.phenomenon.name)
     augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
     probe = Probe(base, job.render_params)

@@ -11,6 +11,9 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
                          ``calibration/`` left by an older version is renamed ``calibration-0/``
     calibration-<r>-control/  with ``calibration_control``: run r refined ``effect_steps``
                          more trials from its best θ, as ``control/`` continues the baseline
+    screen.json          the candidates screened out before the effects are refined: no fit
+                         could name them here (:mod:`physinfer.discrepancy.screen`;
+                         skipped with ``screen=False``)
     limits.json          each candidate's detection limit at the best baseline fit
                          (:mod:`physinfer.discrepancy.limits`; skipped with ``limits=False``)
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
@@ -134,6 +137,8 @@ class DiagnoseSettings:
         limits: Estimate each candidate's detection limit (``detectable_from``).
         limit_config: The detection-limit ladder's settings (``reveal``: also try another
             view and a longer clip).
+        screen: Leave out the candidates whose signature at the baseline's fit no fit could
+            name, before they are refined (:mod:`physinfer.discrepancy.screen`).
         scene_set: The scene's known settings (``--scene-set``; see :mod:`physinfer.scene`),
             bound to every model of the diagnosis and recorded in each stage's ``run.json``
             and in ``model.json``.
@@ -182,6 +187,7 @@ class DiagnoseSettings:
     videos: bool = True
     limits: bool = True
     limit_config: LimitConfig = field(default_factory=LimitConfig)
+    screen: bool = True
     scene_set: Mapping[str, Any] = field(default_factory=dict)
     workers: int | None = None
     scheduler: str | None = None
@@ -318,13 +324,22 @@ def _diagnose_stages(
     gaps = GapContext(target, target_embedding, tuple(seeds), settings.out)
     common = {"registry": registry, "settings": settings, "on_trial": bars.update}
     clock = StageClock()
-    effects = list(effect_objs)
 
     # 1. The baseline.
     say(f"[1/6] refining the baseline ({steps} trials)")
     with clock.stage("baseline"):
         baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
         gap0 = gaps.measure(base, baseline.best_params, "baseline")
+    screened: dict[str, dict[str, Any]] = {}
+    if settings.screen:
+        from physinfer.discrepancy.screen import screen_effects
+
+        with clock.stage("screen"):
+            screens = screen_effects(settings, base, target.render_params, baseline.best_params,
+                                     gap0.embeddings, effect_objs, say, pool)  # fmt: skip
+        screened = {name: record for name, record in screens.items() if record["screened"]}
+    refined = {name: effect for name, effect in effect_objs.items() if name not in screened}
+    effects = list(refined)
 
     # The stages below start from the baseline's fit and not from each other: side by side
     # on workers first, if there are any; the pass below then reads them from disk.
@@ -343,7 +358,7 @@ def _diagnose_stages(
             control_stage(base, target, baseline.best_params, gaps, effect_steps=effect_steps,
                           target_label=target_label, **common)  # fmt: skip
         ]
-    for name, effect in effect_objs.items():
+    for name, effect in refined.items():
         say(f"[3/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
         with clock.stage(f"effect-{name}"):
             stages.append(
@@ -388,12 +403,12 @@ def _diagnose_stages(
         runs = settings.calibration_runs if settings.calibrate else 0
         n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], runs,
                                         n_gaps=2 + runs * (2 if settings.calibration_control else 1)
-                                        + 2 * len(effect_objs))  # fmt: skip
+                                        + 2 * len(effect_objs), unrefined=len(screened))  # fmt: skip
         limits_at = limit_scale(scale_range, gap0.floor_q95)
         low = scale_range[0] if limits_at != scale_range[0] else None  # read there too
         with clock.stage("limits"):
-            limits = run_limits(registry, settings, base, target, before, effect_objs, limits_at, n_sims, say, pool,
-                                scale_low=low)  # fmt: skip
+            limits = run_limits(registry, settings, base, target, before, refined, limits_at, n_sims, say, pool,
+                                scale_low=low, n_candidates=len(effect_objs))  # fmt: skip
         for cand in candidates:
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
@@ -410,6 +425,11 @@ def _diagnose_stages(
         limits = {k: v for k, v in limits.items() if k != "effects"}
         limits.update(null_scale=limits_at, null_scale_exact=scale_range[0] == scale_range[1])
     report["limits"] = limits
+    report["screened"] = [
+        {"effect": name, "description": effect_objs[name].description, "reason": record["reason"],
+         "rungs": record["rungs"]}  # fmt: skip
+        for name, record in screened.items()
+    ]
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
@@ -451,5 +471,6 @@ def _judge(
                 "run_dir": stage.result.run_dir,
             }
         )
-    verdict = final_verdict(misspecification(tested, scale, rule), candidates, rule)
+    # Candidates screened out count in the effect test's divisor: the others' levels do not change.
+    verdict = final_verdict(misspecification(tested, scale, rule), candidates, rule, n_candidates=len(effect_objs))
     return candidates, verdict, name_effect(candidates, verdict["misspecified"])

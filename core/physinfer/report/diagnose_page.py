@@ -39,7 +39,8 @@ def diagnose_content(run: Path) -> Content:
     settings = {"plugin": report.get("plugin"), "target": report.get("target")}
     settings.update(report.get("settings") or {})
     body = [
-        section("Verdict", verdict(report), candidates(report.get("candidates") or [])),
+        section("Verdict", verdict(report), candidates(report.get("candidates") or []),
+                screened(report.get("screened") or [])),
         detection_limits(report),
         _parameters(report, model),
         section(
@@ -101,6 +102,12 @@ def candidates(found: Sequence[Mapping[str, Any]]) -> str:
         numbers = (c.get("gap"), c.get("ratio"), c.get("p_value"), c.get("significant"))
         rows.append((c.get("effect"), c.get("description"), *numbers, values, bounds))
     return table(headers, rows)
+
+
+def screened(found: Sequence[Mapping[str, Any]]) -> str:
+    """The effects left out before refinement: no fit could name them on this target."""
+    lines = [paragraph(f"{c.get('effect')}: screened out, not refined ({c.get('reason')})", "note") for c in found]
+    return "".join(lines)
 
 
 def detection_limits(report: Mapping[str, Any]) -> str:

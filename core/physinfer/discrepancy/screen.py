@@ -1,0 +1,259 @@
+"""Screening: the candidates no fit could name on this target, found before any is refined.
+
+A diagnosis refines one augmented model per candidate effect (a full search, its selection
+and two gaps: on an 8-s flag about 100 s each). The detection-limit ladder
+(:mod:`physinfer.discrepancy.limits`) can tell beforehand that some cannot be named at any
+strength in their range, and its cheap half suffices: the rungs' *shifts* (their clips
+against θ̂'s own re-simulations, already measured by the baseline's gap), with no refit. The
+rule's bound runs one way:
+
+- a refit of the base parameters only lowers a rung's gap (it is never worse than θ̂), so a
+  rung whose shift does not clear its threshold does not clear it after any refit; and
+- a larger null scale only raises every threshold, and the null scale is held at least at
+  the noise floor (:func:`physinfer.discrepancy.decide.null_scale`).
+
+So when no rung's shift clears its threshold at the noise floor (each rung's threshold raised
+by its own seed noise, as in :mod:`physinfer.discrepancy.limit_rule`), the effect's detection
+limit lies beyond its range whatever the calibration finds, and its model is not refined: the
+candidate is *screened out*, reported with the reason ("no signature", "hidden by its own
+randomness") in ``diagnosis.json`` (``screened``) and counted as not significant. On 8-s
+flags that is wind shear on every target measured and often the gusts — the two effects no
+stored diagnosis ever named.
+
+What it changes (docs/discrepancy.md, "Screening"): the stages that are refined have the
+trials they had; a screened candidate is never significant (it was not, in any stored table);
+the effect test's Bonferroni divisor still counts it (the other candidates' levels are
+unchanged); and the best baseline fit no longer includes its ablated fit (its best θ with the
+effect off), so the tested gap and the baseline distances every candidate is compared with
+can only grow — the decisions can only lean towards "misspecified", never away. The screen
+reads θ̂ of the baseline stage (not yet the control's), with the ladder's seeds, two per rung.
+A deterministic phenomenon (noise floor 0) is never screened: any shift clears a zero
+threshold. ``diagnose --no-screen`` refines every candidate.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from physinfer.discrepancy.ladder import (
+    Ladder,
+    Probe,
+    cross_median,
+    ladder_seeds,
+    pairwise,
+    pairwise_median,
+    run_ladder,
+)
+from physinfer.discrepancy.limit_rule import Threshold
+from physinfer.io import atomic_write_json
+
+if TYPE_CHECKING:
+    from physinfer.discrepancy.parallel import WorkerPool
+    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.loop import Pipeline
+
+Log = Callable[[str], None]
+
+#: Seeds per rung: the fewest the ladder uses on a chaotic phenomenon (two clips give a floor).
+SCREEN_SEEDS = 2
+SCREEN_FILE = "screen.json"
+
+
+@dataclass(frozen=True)
+class ScreenJob:
+    """One effect's rungs at θ̂, for a worker (plain data: it rebuilds the models)."""
+
+    settings: DiagnoseSettings
+    render_params: Mapping[str, Any]
+    name: str
+    theta: dict[str, float]
+    fractions: tuple[float, ...]
+    seeds: tuple[int, ...]
+
+
+def run_screen_job(job: ScreenJob) -> list[np.ndarray]:
+    """Simulate one effect's rungs in this (worker) process: each rung's ``(n, D_e)`` embeddings."""
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.discrepancy.parallel import worker_pipeline
+    from physinfer.session import fixed_by_user
+    from physinfer.threads import refinement_torch_threads, torch_threads
+
+    registry, base = worker_pipeline(job.settings)
+    effect = registry.effect(job.name, phenomenon=base.phenomenon.name)
+    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
+    with torch_threads(refinement_torch_threads()):
+        ladder = run_ladder(Probe(base, job.render_params), augmented, job.theta,
+                            effect.parameter_space, job.fractions, job.seeds)  # fmt: skip
+    return ladder.embeddings
+
+
+def judge_rungs(
+    rungs: Sequence[np.ndarray], base_embeddings: np.ndarray, threshold: Threshold
+) -> dict[str, Any]:
+    """Whether any rung's shift clears its threshold (each raised by the rung's own noise).
+
+    Returns:
+        ``screened`` (no rung clears it), ``reason`` (when screened) and ``rungs`` (each
+        rung's ``shift``, own ``floor`` and ``threshold``).
+    """
+    floor = pairwise_median(base_embeddings)
+    base_pairs = pairwise(base_embeddings)
+    floor_q95 = float(np.quantile(base_pairs, 0.95)) if base_pairs else 0.0
+    records = []
+    for emb in rungs:
+        own = pairwise_median(emb)
+        # The rung's own noise counts only beyond θ̂'s spread, as in the limit rule.
+        records.append({
+            "shift": cross_median(emb, base_embeddings),
+            "floor": own,
+            "threshold": threshold.at(own - floor if own > floor_q95 else 0.0),
+        })  # fmt: skip
+    clears = [np.isfinite(r["shift"]) and r["shift"] > r["threshold"] for r in records]
+    # A rung that failed to simulate says nothing: only a ladder measured throughout screens.
+    measured = all(np.isfinite(r["shift"]) for r in records)
+    screened = bool(records) and measured and not any(clears)
+    reason = None
+    if screened:
+        top, tau = records[-1], threshold.at()
+        if top["shift"] > tau:
+            reason = (
+                f"hidden by its own randomness: at the top of its range its clips differ by {top['floor']:.3g} "
+                f"({top['floor'] / max(floor, 1e-300):.2g} x the baseline's noise floor), more than its shift "
+                f"{top['shift']:.3g} can beat (threshold {top['threshold']:.3g} at the noise floor)"
+            )
+        else:
+            reason = (
+                f"no signature within its range: at its top the shift is {top['shift']:.3g}, "
+                f"{top['shift'] / tau:.2f} x the threshold {tau:.3g} at the noise floor"
+            )
+    return {"screened": screened, "reason": reason, "rungs": records}
+
+
+def screen_effects(
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    render_params: Mapping[str, Any],
+    theta: Mapping[str, float],
+    base_embeddings: np.ndarray,
+    effect_objs: Mapping[str, Any],
+    say: Log,
+    pool: WorkerPool | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Each candidate's screen at θ̂ (cached in ``screen.json``): effect name → :func:`judge_rungs`'s
+    record with the rungs' ``fraction`` and ``values``.
+
+    Nothing is simulated for a deterministic phenomenon or with too few re-simulations of θ̂
+    (every candidate is kept)."""
+    base_emb = np.asarray(base_embeddings, dtype=np.float64)
+    floor = pairwise_median(base_emb) if base_emb.ndim == 2 and len(base_emb) >= 2 else 0.0
+    if floor <= 0.0:
+        return {}
+    fractions = tuple(settings.limit_config.fractions)
+    seeds = tuple(ladder_seeds(settings.seed, SCREEN_SEEDS))
+    space = base.simulator.parameter_space
+    theta = {k: float(v) for k, v in space.complete(theta).items()}
+    key = {"theta": theta, "floor": floor, "effects": sorted(effect_objs), "fractions": list(fractions),
+           "seeds": list(seeds), "rule": _rule_key(settings), "floor_samples": settings.floor_samples}  # fmt: skip
+    path = settings.out / SCREEN_FILE
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key:
+            return stored["effects"]
+    say(f"      screening {len(effect_objs)} candidates: each effect's signature at the baseline's fit")
+    # The strongest rung first: an effect whose top clears its threshold is refined, and only
+    # the others' weaker rungs (whose own noise, and so threshold, may be smaller) are simulated.
+    top = _simulate(settings, base, render_params, theta, effect_objs, list(effect_objs), fractions[-1:], seeds,
+                    say, pool)  # fmt: skip
+    thresholds = {
+        name: Threshold.of(floor, len(effect.parameter_space), settings.rule, len(effect_objs), settings.floor_samples)
+        for name, effect in effect_objs.items()
+    }
+    doubtful = [name for name in effect_objs if judge_rungs(top[name], base_emb, thresholds[name])["screened"]]
+    lower = _simulate(settings, base, render_params, theta, effect_objs, doubtful, fractions[:-1], seeds, say, pool)
+    result = {}
+    for name, effect in effect_objs.items():
+        measured = fractions if name in doubtful else fractions[-1:]
+        record = judge_rungs([*lower.get(name, []), *top[name]], base_emb, thresholds[name])
+        values = _values(effect.parameter_space, measured)
+        for rung, fraction, v in zip(record["rungs"], measured, values, strict=True):
+            rung.update(fraction=fraction, values=v)
+        result[name] = record
+        say(f"      {name}: " + (f"screened out ({record['reason']})" if record["screened"] else "refined"))
+    atomic_write_json(path, {"key": key, "effects": result})
+    return json.loads(path.read_text())["effects"]
+
+
+def _rule_key(settings: DiagnoseSettings) -> dict[str, Any]:
+    import dataclasses
+
+    return dataclasses.asdict(settings.rule)
+
+
+def _values(effect_space: Any, fractions: Sequence[float]) -> list[dict[str, float]]:
+    from physinfer.discrepancy.ladder import strength_path, values_at
+
+    moved, held = strength_path(effect_space)
+    return [values_at(effect_space, moved, held, f) for f in fractions]
+
+
+def _simulate(
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    render_params: Mapping[str, Any],
+    theta: dict[str, float],
+    effect_objs: Mapping[str, Any],
+    names: Sequence[str],
+    fractions: tuple[float, ...],
+    seeds: tuple[int, ...],
+    say: Log,
+    pool: WorkerPool | None,
+) -> dict[str, list[np.ndarray]]:
+    """The rungs at ``fractions`` of each effect in ``names``: name → each rung's embeddings."""
+    jobs = [ScreenJob(settings, dict(render_params), name, theta, fractions, seeds) for name in names]
+    return dict(zip(names, _run_jobs(jobs, base, render_params, effect_objs, say, pool), strict=True))
+
+
+def _run_jobs(
+    jobs: list[ScreenJob],
+    base: Pipeline,
+    render_params: Mapping[str, Any],
+    effect_objs: Mapping[str, Any],
+    say: Log,
+    pool: WorkerPool | None,
+) -> list[list[np.ndarray]]:
+    """Each job's rungs: side by side on the pool's workers when it has two or more; a job
+    that fails there (or every job without them) runs here, as it would alone."""
+    results: list[list[np.ndarray] | None] = [None] * len(jobs)
+    if pool is not None and pool.size >= 2 and len(jobs) >= 2:
+        executor = pool.executor()
+        futures = [executor.submit(run_screen_job, job) for job in jobs]
+        for i, (job, future) in enumerate(zip(jobs, futures, strict=True)):
+            try:
+                results[i] = future.result()
+            except Exception as exc:  # noqa: BLE001 - run here instead, where it fails (or not) as it would alone
+                say(f"      {job.name}'s screen failed on a worker ({type(exc).__name__}: {exc}); running it here")
+    for i, job in enumerate(jobs):
+        if results[i] is None:
+            results[i] = _run_here(job, base, render_params, effect_objs[job.name])
+    return [r for r in results if r is not None]
+
+
+def _run_here(job: ScreenJob, base: Pipeline, render_params: Mapping[str, Any], effect: Any) -> list[np.ndarray]:
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.session import fixed_by_user
+
+    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
+    ladder: Ladder = run_ladder(Probe(base, render_params), augmented, job.theta, effect.parameter_space,
+                                job.fractions, job.seeds)  # fmt: skip
+    return ladder.embeddings
+
+
+def screened_limit(record: Mapping[str, Any]) -> dict[str, Any]:
+    """A screened candidate's detection-limit record (none in its range, with the screen's reason)."""
+    return {"detectable_from": None, "fraction": None, "reason": record["reason"], "mimicked_by": [],
+            "rungs": record["rungs"], "reveal": [], "screened": True}  # fmt: skip
