@@ -147,6 +147,9 @@ def test_a_diagnosis_leaves_out_the_effect_no_fit_could_name(tmp_path: Path, tar
     for stage in ("baseline", "control", "effect-quadratic_drag"):
         one, two = (RunDirectory(tmp_path / run / stage).read_trials() for run in ("screened", "all"))
         assert [(t.params, t.distance) for t in one] == [(t.params, t.distance) for t in two], stage
+    # Resumed with the screen, a diagnosis whose effect stage already finished uses it.
+    resumed = _diagnose(tmp_path / "all", target, screen=True)
+    assert resumed["screened"] == [] and [c["effect"] for c in resumed["candidates"]] == ["quadratic_drag", "inert"]
     # A re-run resumes the screen from screen.json (nothing re-simulated, the same verdict).
     again = _diagnose(tmp_path / "screened", target, screen=True)
     assert again["screened"] == report["screened"] and again["named_effect"] == report["named_effect"]

@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -143,22 +144,26 @@ def screen_effects(
     effect_objs: Mapping[str, Any],
     say: Log,
     pool: WorkerPool | None = None,
+    n_candidates: int | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Each candidate's screen at θ̂ (cached in ``screen.json``): effect name → :func:`judge_rungs`'s
     record with the rungs' ``fraction`` and ``values``.
 
-    Nothing is simulated for a deterministic phenomenon or with too few re-simulations of θ̂
-    (every candidate is kept)."""
+    ``n_candidates``: the candidates the rule counts (``None``: ``effect_objs``; more when
+    some are not screened at all). Nothing is simulated for a deterministic phenomenon or
+    with too few re-simulations of θ̂ (every candidate is kept)."""
     base_emb = np.asarray(base_embeddings, dtype=np.float64)
     floor = pairwise_median(base_emb) if base_emb.ndim == 2 and len(base_emb) >= 2 else 0.0
-    if floor <= 0.0:
+    if floor <= 0.0 or not effect_objs:
         return {}
+    counted = len(effect_objs) if n_candidates is None else n_candidates
     fractions = tuple(settings.limit_config.fractions)
     seeds = tuple(ladder_seeds(settings.seed, SCREEN_SEEDS))
     space = base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(theta).items()}
     key = {"theta": theta, "floor": floor, "effects": sorted(effect_objs), "fractions": list(fractions),
-           "seeds": list(seeds), "rule": _rule_key(settings), "floor_samples": settings.floor_samples}  # fmt: skip
+           "seeds": list(seeds), "rule": _rule_key(settings), "floor_samples": settings.floor_samples,
+           "candidates": counted}  # fmt: skip
     path = settings.out / SCREEN_FILE
     if path.is_file():
         stored = json.loads(path.read_text())
@@ -170,7 +175,7 @@ def screen_effects(
     top = _simulate(settings, base, render_params, theta, effect_objs, list(effect_objs), fractions[-1:], seeds,
                     say, pool)  # fmt: skip
     thresholds = {
-        name: Threshold.of(floor, len(effect.parameter_space), settings.rule, len(effect_objs), settings.floor_samples)
+        name: Threshold.of(floor, len(effect.parameter_space), settings.rule, counted, settings.floor_samples)
         for name, effect in effect_objs.items()
     }
     doubtful = [name for name in effect_objs if judge_rungs(top[name], base_emb, thresholds[name])["screened"]]
@@ -186,6 +191,13 @@ def screen_effects(
         say(f"      {name}: " + (f"screened out ({record['reason']})" if record["screened"] else "refined"))
     atomic_write_json(path, {"key": key, "effects": result})
     return json.loads(path.read_text())["effects"]
+
+
+def refined_already(out: Path, name: str) -> bool:
+    """Whether ``out`` holds the finished stage of effect ``name`` (both its gaps measured): a
+    resumed diagnosis uses it rather than screen the effect out (its cost is paid)."""
+    stage = out / f"effect-{name}"
+    return (stage / "gap.json").is_file() and (stage / "gap_effect_off.json").is_file()
 
 
 def _rule_key(settings: DiagnoseSettings) -> dict[str, Any]:

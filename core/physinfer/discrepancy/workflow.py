@@ -332,11 +332,12 @@ def _diagnose_stages(
         gap0 = gaps.measure(base, baseline.best_params, "baseline")
     screened: dict[str, dict[str, Any]] = {}
     if settings.screen:
-        from physinfer.discrepancy.screen import screen_effects
+        from physinfer.discrepancy.screen import refined_already, screen_effects
 
+        unrefined = {name: e for name, e in effect_objs.items() if not refined_already(settings.out, name)}
         with clock.stage("screen"):
-            screens = screen_effects(settings, base, target.render_params, baseline.best_params,
-                                     gap0.embeddings, effect_objs, say, pool)  # fmt: skip
+            screens = screen_effects(settings, base, target.render_params, baseline.best_params, gap0.embeddings,
+                                     unrefined, say, pool, n_candidates=len(effect_objs))  # fmt: skip
         screened = {name: record for name, record in screens.items() if record["screened"]}
     refined = {name: effect for name, effect in effect_objs.items() if name not in screened}
     effects = list(refined)
