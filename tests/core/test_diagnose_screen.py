@@ -132,6 +132,7 @@ def test_a_diagnosis_leaves_out_the_effect_no_fit_could_name(tmp_path: Path, tar
     assert report["screened"][0]["reason"].startswith("no signature")
     assert [c["effect"] for c in report["candidates"]] == ["quadratic_drag"]
     assert not (tmp_path / "screened" / "effect-inert").exists()
+    assert "inert: screened out, not refined (no signature" in (tmp_path / "screened" / "report.html").read_text()
     assert (tmp_path / "screened" / "screen.json").is_file() and "screen" in report["timing"]["stages_s"]
     # The drag's signature clears its threshold at the strongest rung: only that rung was simulated.
     import json
