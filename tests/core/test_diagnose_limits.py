@@ -424,3 +424,48 @@ def test_a_ladder_that_fails_on_a_worker_runs_here_with_the_same_limits(pendulum
         for name in ("quadratic_drag", "hum"):
             assert result["effects"][name] == here["effects"][name], name
         assert result["simulations"] == here["simulations"]
+
+
+def test_the_lower_scale_reading_reuses_the_refits_it_shares_with_the_first(pendulum, monkeypatch):
+    """Read at two null scales (a range), a limit measures the strongest rung's refit in both
+    readings first, from the same state: the second takes it (and any further ones measured in
+    the same order) from the first instead of simulating it again — the same limits to the
+    last digit, fewer simulations."""
+    from pendulum_example.physics import QuadraticDrag
+
+    import physinfer.discrepancy.limits as limits_module
+    from physinfer.discrepancy.limit_rule import RefitLog
+    from physinfer.embedders import GridSpectrumEmbedder
+    from physinfer.loop import Pipeline
+
+    phenomenon, renderer = pendulum
+    embedder = GridSpectrumEmbedder(n_frames=20)
+    base_sim, drag_sim = _jittery(0.1, 20), _jittery(0.1, 20, [QuadraticDrag()])
+    base = Pipeline(phenomenon, base_sim, renderer, embedder, [])
+    augmented = {"quadratic_drag": Pipeline(phenomenon, drag_sim, renderer, embedder, list(drag_sim.effects))}
+    probe = Probe(base, {"size": 48})
+    base_emb = probe.embed(probe.trajectories(base_sim, [THETA] * 4, [11, 12, 13, 14]))
+    floor = pairwise_median(base_emb)
+    inputs = LimitInputs(
+        base=base, augmented=augmented, theta=THETA, base_embeddings=base_emb, render_params={"size": 48},
+        scale=3.0 * floor, scale_low=floor, rule=DecisionRule(), floor_samples=4, seed=0, diagnosis_simulations=300,
+    )  # fmt: skip
+    config = LimitConfig(seeds=2, fractions=(0.25, 0.5, 1.0))
+    shared = detection_limits(inputs, config)
+
+    class Forgetful(RefitLog):  # no reading sees another's refits: what the code did before
+        @property
+        def entries(self):
+            return []
+
+        @entries.setter
+        def entries(self, _value):
+            pass
+
+    monkeypatch.setattr(limits_module, "RefitLog", Forgetful)
+    alone = detection_limits(inputs, config)
+    one, two = shared["effects"]["quadratic_drag"], alone["effects"]["quadratic_drag"]
+    assert "at_lower_scale" in one
+    assert one["at_lower_scale"] == two["at_lower_scale"] and one["fraction"] == two["fraction"]
+    assert [r["refit_gap"] for r in one["rungs"]] == [r["refit_gap"] for r in two["rungs"]]
+    assert shared["simulations"] < alone["simulations"], (shared["simulations"], alone["simulations"])

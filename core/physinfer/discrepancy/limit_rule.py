@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,14 @@ from physinfer.discrepancy.ladder import (
 )
 from physinfer.discrepancy.refit import RefitState, measured_refit, movers, predicted_refit
 from physinfer.parameters import ParameterSpace
+
+
+@dataclass
+class RefitLog:
+    """The measured refits of one :func:`effect_limit` call, in order: ``(rung, gap, u, and
+    the state it left: jac, u, emb)`` — what a second reading of the same ladder replays."""
+
+    entries: list[tuple[int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -147,6 +155,7 @@ def effect_limit(
     effect_space: ParameterSpace,
     measure: str,
     keep: Sequence[bool] | None = None,
+    refits: RefitLog | None = None,
 ) -> dict[str, Any]:
     """The detection limit of one effect from its ladder.
 
@@ -162,6 +171,11 @@ def effect_limit(
         measure: ``"all"`` rungs' refits measured, ``"key"`` (the top and the limit's), or
             ``"none"`` (predicted only: a what-if).
         keep: Base parameters the refit may move (``None``: all).
+        refits: The measured refits of an earlier call on the same ladder, Jacobian, seeds and
+            ``keep`` (the same limit read at another threshold): as long as this call measures
+            the rungs in the order that one did, its refits are taken from it instead of
+            simulated again — exactly what they would be, since a refit depends only on the
+            rung and the state the earlier ones left. This call's own are appended.
 
     Returns:
         ``detectable_from``, ``fraction``, ``reason``, ``mimicked_by``, ``rungs`` (each with
@@ -195,15 +209,25 @@ def effect_limit(
     state = RefitState(jac.copy(), u0, base_embeddings)
     # A deterministic rung is one simulation per point: search more (see measured_refit).
     multipliers, polish = ((1.0, 1.5, 2.0, 3.0), 2) if measure == "all" else ((1.0, 2.0), 1)
+    replay = list(refits.entries) if refits is not None else []
+    done: list[int] = []  # the rungs this call measured, in order
 
     def measure_rung(i: int) -> None:
         r = rungs[i]
         if r["measured"] or measure == "none":
             return
-        gap, u = measured_refit(
-            probe, ladder.embeddings[i], state, (u0, base_embeddings), r["delta"], seeds,
-            multipliers=multipliers, polish=polish, keep=keep,
-        )  # fmt: skip
+        k = len(done)
+        if k < len(replay) and replay[k][0] == i and [e[0] for e in replay[:k]] == done:
+            _, gap, u, jac_after, u_after, emb_after = replay[k]
+            state.jac, state.u, state.emb = jac_after.copy(), u_after, emb_after
+        else:
+            gap, u = measured_refit(
+                probe, ladder.embeddings[i], state, (u0, base_embeddings), r["delta"], seeds,
+                multipliers=multipliers, polish=polish, keep=keep,
+            )  # fmt: skip
+            if refits is not None and [e[0] for e in refits.entries] == done:
+                refits.entries.append((i, gap, u, state.jac.copy(), state.u, state.emb))
+        done.append(i)
         if gap < r["shift"]:
             r.update(refit_gap=gap, delta=u - u0)
         else:

@@ -58,6 +58,7 @@ from physinfer.discrepancy.ladder import (
     values_at,
 )
 from physinfer.discrepancy.limit_rule import (
+    RefitLog,
     Threshold,
     effect_limit,
     interpolate_limit,
@@ -220,11 +221,14 @@ def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[
     ladder = run_ladder(probe, augmented, task.theta, effect_space, task.fractions, task.seeds)
     common = (probe, ladder, task.theta, task.base_embeddings, task.jac, task.threshold, list(task.refit_seeds))
     measure = "all" if task.deterministic else "key"
-    limit = effect_limit(*common, effect_space=effect_space, measure=measure)
+    refits = RefitLog()
+    limit = effect_limit(*common, effect_space=effect_space, measure=measure, refits=refits)
     limit["threshold"] = task.threshold.at()
     if task.threshold_low is not None and task.threshold_low != task.threshold:
-        # The same rungs read at the range's lower end: the limit with every run refined lies between.
-        low = effect_limit(*common[:5], task.threshold_low, *common[6:], effect_space=effect_space, measure=measure)
+        # The same rungs read at the range's lower end: the limit with every run refined lies
+        # between. The refits both readings measure in the same order are measured once.
+        low = effect_limit(*common[:5], task.threshold_low, *common[6:], effect_space=effect_space, measure=measure,
+                           refits=refits)  # fmt: skip
         limit["at_lower_scale"] = {
             "detectable_from": low["detectable_from"], "reason": low["reason"], "threshold": task.threshold_low.at(),
         }  # fmt: skip
