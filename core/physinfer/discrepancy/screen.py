@@ -21,7 +21,7 @@ flags that is wind shear on every target measured and often the gusts — the tw
 stored diagnosis ever named.
 
 What it changes (docs/discrepancy.md, "Screening"): the stages that are refined have the
-trials they had; a screened candidate is never significant (it was not, in any stored table);
+trials they had; a screened candidate is never significant (no stored table named shear or gusts);
 the effect test's Bonferroni divisor still counts it (the other candidates' levels are
 unchanged); and the best baseline fit no longer includes its ablated fit (its best θ with the
 effect off), so the tested gap and the baseline distances every candidate is compared with
