@@ -161,6 +161,7 @@ def diagnose_cmd(
     given = dict(locals())
     from physinfer import api
     from physinfer.cli.app import options_from_cli
+    from physinfer.discrepancy.limit_text import screened_line
     from physinfer.discrepancy.limits import limit_line
     from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 
@@ -196,7 +197,7 @@ def diagnose_cmd(
         if note := limits_scale_note(report):
             err_console.print(f"  ({note})", highlight=False)
     for c in report.get("screened") or []:
-        err_console.print(f"  {c['effect']}: screened out, not refined ({c['reason']})", highlight=False)
+        err_console.print(f"  {screened_line(c)}", highlight=False)
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 

@@ -42,3 +42,8 @@ def limit_line(candidate: Mapping[str, Any], named: str | None, clip_seconds: fl
     if low and low["detectable_from"] != limit["detectable_from"]:  # the null scale is a range
         line += f" [at the null scale's lower end: {summary_phrase(low).removeprefix('could reveal ')}]"
     return line
+
+
+def screened_line(record: Mapping[str, Any]) -> str:
+    """``wind_shear: screened out, not refined (<reason>)`` for a report's ``screened`` entry."""
+    return f"{record['effect']}: screened out, not refined ({record['reason']})"

@@ -401,15 +401,24 @@ def limit_runner(pool: WorkerPool | None, render_params: Mapping[str, Any], say:
     def run(tasks: list[EffectTask]) -> list[Any]:
         say(f"      the {len(tasks)} effects' ladders run side by side on {pool.where()}")
         keep = settings.limit_config.reveal
-        executor = pool.executor()
-        futures = [executor.submit(run_limit_job, LimitJob(settings, dict(render_params), t, keep)) for t in tasks]
-        results = []
-        for task, future in zip(tasks, futures, strict=True):
-            try:
-                results.append(future.result())
-            except Exception as exc:  # noqa: BLE001 - run here instead, where it fails (or not) as it would alone
-                say(f"      {task.name}'s ladder failed on a worker ({type(exc).__name__}: {exc}); running it here")
-                results.append(None)
-        return results
+        jobs = [LimitJob(settings, dict(render_params), t, keep) for t in tasks]
+        return side_by_side(pool, run_limit_job, jobs, [f"{t.name}'s ladder" for t in tasks], say)
 
     return run
+
+
+def side_by_side(pool: WorkerPool, function: Callable[[Any], Any], jobs: Sequence[Any], labels: Sequence[str],
+                 say: Log) -> list[Any]:  # fmt: skip
+    """``function(job)`` for every job on the pool's workers, in order; ``None`` for a job that
+    failed there (its ``label`` is logged), for the caller to run in this process, where it
+    fails (or not) as it would alone."""
+    executor = pool.executor()
+    futures = [executor.submit(function, job) for job in jobs]
+    results = []
+    for label, future in zip(labels, futures, strict=True):
+        try:
+            results.append(future.result())
+        except Exception as exc:  # noqa: BLE001 - the caller runs it here instead
+            say(f"      {label} failed on a worker ({type(exc).__name__}: {exc}); running it here")
+            results.append(None)
+    return results

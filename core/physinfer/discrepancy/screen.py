@@ -33,6 +33,7 @@ threshold. ``diagnose --no-screen`` refines every candidate.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -77,20 +78,26 @@ class ScreenJob:
     seeds: tuple[int, ...]
 
 
-def run_screen_job(job: ScreenJob) -> list[np.ndarray]:
-    """Simulate one effect's rungs in this (worker) process: each rung's ``(n, D_e)`` embeddings."""
-    from physinfer.discrepancy.candidates import augmented_pipeline
+def run_screen_job(job: ScreenJob) -> Ladder:
+    """Simulate one effect's rungs in this (worker) process (its clips left behind)."""
     from physinfer.discrepancy.parallel import worker_pipeline
-    from physinfer.session import fixed_by_user
     from physinfer.threads import refinement_torch_threads, torch_threads
 
     registry, base = worker_pipeline(job.settings)
-    effect = registry.effect(job.name, phenomenon=base.phenomenon.name)
-    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
     with torch_threads(refinement_torch_threads()):
-        ladder = run_ladder(Probe(base, job.render_params), augmented, job.theta,
-                            effect.parameter_space, job.fractions, job.seeds)  # fmt: skip
-    return ladder.embeddings
+        ladder = _rungs(job, base, registry.effect(job.name, phenomenon=base.phenomenon.name))
+    ladder.trajectories = []  # only the embeddings are read: not worth the transfer
+    return ladder
+
+
+def _rungs(job: ScreenJob, base: Pipeline, effect: Any) -> Ladder:
+    """``job``'s rungs with ``base`` and ``effect`` switched in."""
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.session import fixed_by_user
+
+    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
+    return run_ladder(Probe(base, job.render_params), augmented, job.theta, effect.parameter_space,
+                      job.fractions, job.seeds)  # fmt: skip
 
 
 def judge_rungs(
@@ -114,10 +121,8 @@ def judge_rungs(
             "floor": own,
             "threshold": threshold.at(own - floor if own > floor_q95 else 0.0),
         })  # fmt: skip
-    clears = [np.isfinite(r["shift"]) and r["shift"] > r["threshold"] for r in records]
-    # A rung that failed to simulate says nothing: only a ladder measured throughout screens.
-    measured = all(np.isfinite(r["shift"]) for r in records)
-    screened = bool(records) and measured and not any(clears)
+    # A rung that failed to simulate (NaN shift) says nothing: only a ladder measured throughout screens.
+    screened = bool(records) and all(r["shift"] <= r["threshold"] for r in records)
     reason = None
     if screened:
         top, tau = records[-1], threshold.at()
@@ -162,7 +167,7 @@ def screen_effects(
     space = base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(theta).items()}
     key = {"theta": theta, "floor": floor, "effects": sorted(effect_objs), "fractions": list(fractions),
-           "seeds": list(seeds), "rule": _rule_key(settings), "floor_samples": settings.floor_samples,
+           "seeds": list(seeds), "rule": dataclasses.asdict(settings.rule), "floor_samples": settings.floor_samples,
            "candidates": counted}  # fmt: skip
     path = settings.out / SCREEN_FILE
     if path.is_file():
@@ -178,15 +183,15 @@ def screen_effects(
         name: Threshold.of(floor, len(effect.parameter_space), settings.rule, counted, settings.floor_samples)
         for name, effect in effect_objs.items()
     }
-    doubtful = [name for name in effect_objs if judge_rungs(top[name], base_emb, thresholds[name])["screened"]]
+    doubtful = [name for name in effect_objs if judge_rungs(top[name].embeddings, base_emb, thresholds[name])["screened"]]
     lower = _simulate(settings, base, render_params, theta, effect_objs, doubtful, fractions[:-1], seeds, say, pool)
     result = {}
-    for name, effect in effect_objs.items():
-        measured = fractions if name in doubtful else fractions[-1:]
-        record = judge_rungs([*lower.get(name, []), *top[name]], base_emb, thresholds[name])
-        values = _values(effect.parameter_space, measured)
-        for rung, fraction, v in zip(record["rungs"], measured, values, strict=True):
-            rung.update(fraction=fraction, values=v)
+    for name in effect_objs:
+        ladders = [lower[name], top[name]] if name in doubtful else [top[name]]
+        record = judge_rungs([e for ladder in ladders for e in ladder.embeddings], base_emb, thresholds[name])
+        fractions_values = [(f, v) for ladder in ladders for f, v in zip(ladder.fractions, ladder.values, strict=True)]
+        for rung, (fraction, values) in zip(record["rungs"], fractions_values, strict=True):
+            rung.update(fraction=fraction, values=values)
         result[name] = record
         say(f"      {name}: " + (f"screened out ({record['reason']})" if record["screened"] else "refined"))
     atomic_write_json(path, {"key": key, "effects": result})
@@ -200,19 +205,6 @@ def refined_already(out: Path, name: str) -> bool:
     return (stage / "gap.json").is_file() and (stage / "gap_effect_off.json").is_file()
 
 
-def _rule_key(settings: DiagnoseSettings) -> dict[str, Any]:
-    import dataclasses
-
-    return dataclasses.asdict(settings.rule)
-
-
-def _values(effect_space: Any, fractions: Sequence[float]) -> list[dict[str, float]]:
-    from physinfer.discrepancy.ladder import strength_path, values_at
-
-    moved, held = strength_path(effect_space)
-    return [values_at(effect_space, moved, held, f) for f in fractions]
-
-
 def _simulate(
     settings: DiagnoseSettings,
     base: Pipeline,
@@ -224,48 +216,16 @@ def _simulate(
     seeds: tuple[int, ...],
     say: Log,
     pool: WorkerPool | None,
-) -> dict[str, list[np.ndarray]]:
-    """The rungs at ``fractions`` of each effect in ``names``: name → each rung's embeddings."""
+) -> dict[str, Ladder]:
+    """The rungs at ``fractions`` of each effect in ``names``: side by side on the pool's workers
+    when it has two or more; a job that fails there (or every job without them) runs here."""
+    from physinfer.discrepancy.parallel import side_by_side
+
     jobs = [ScreenJob(settings, dict(render_params), name, theta, fractions, seeds) for name in names]
-    return dict(zip(names, _run_jobs(jobs, base, render_params, effect_objs, say, pool), strict=True))
-
-
-def _run_jobs(
-    jobs: list[ScreenJob],
-    base: Pipeline,
-    render_params: Mapping[str, Any],
-    effect_objs: Mapping[str, Any],
-    say: Log,
-    pool: WorkerPool | None,
-) -> list[list[np.ndarray]]:
-    """Each job's rungs: side by side on the pool's workers when it has two or more; a job
-    that fails there (or every job without them) runs here, as it would alone."""
-    results: list[list[np.ndarray] | None] = [None] * len(jobs)
+    results: list[Ladder | None] = [None] * len(jobs)
     if pool is not None and pool.size >= 2 and len(jobs) >= 2:
-        executor = pool.executor()
-        futures = [executor.submit(run_screen_job, job) for job in jobs]
-        for i, (job, future) in enumerate(zip(jobs, futures, strict=True)):
-            try:
-                results[i] = future.result()
-            except Exception as exc:  # noqa: BLE001 - run here instead, where it fails (or not) as it would alone
-                say(f"      {job.name}'s screen failed on a worker ({type(exc).__name__}: {exc}); running it here")
-    for i, job in enumerate(jobs):
-        if results[i] is None:
-            results[i] = _run_here(job, base, render_params, effect_objs[job.name])
-    return [r for r in results if r is not None]
-
-
-def _run_here(job: ScreenJob, base: Pipeline, render_params: Mapping[str, Any], effect: Any) -> list[np.ndarray]:
-    from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.session import fixed_by_user
-
-    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
-    ladder: Ladder = run_ladder(Probe(base, render_params), augmented, job.theta, effect.parameter_space,
-                                job.fractions, job.seeds)  # fmt: skip
-    return ladder.embeddings
-
-
-def screened_limit(record: Mapping[str, Any]) -> dict[str, Any]:
-    """A screened candidate's detection-limit record (none in its range, with the screen's reason)."""
-    return {"detectable_from": None, "fraction": None, "reason": record["reason"], "mimicked_by": [],
-            "rungs": record["rungs"], "reveal": [], "screened": True}  # fmt: skip
+        results = side_by_side(pool, run_screen_job, jobs, [f"{job.name}'s screen" for job in jobs], say)
+    return {
+        job.name: ladder if ladder is not None else _rungs(job, base, effect_objs[job.name])
+        for job, ladder in zip(jobs, results, strict=True)
+    }

@@ -11,7 +11,7 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from physinfer.discrepancy.limit_text import limit_line
+from physinfer.discrepancy.limit_text import limit_line, screened_line
 from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 from physinfer.report.common import Content, parameter_table, read_json, units_of
 from physinfer.report.markup import (
@@ -106,8 +106,7 @@ def candidates(found: Sequence[Mapping[str, Any]]) -> str:
 
 def screened(found: Sequence[Mapping[str, Any]]) -> str:
     """The effects left out before refinement: no fit could name them on this target."""
-    lines = [paragraph(f"{c.get('effect')}: screened out, not refined ({c.get('reason')})", "note") for c in found]
-    return "".join(lines)
+    return "".join(paragraph(screened_line(c), "note") for c in found)
 
 
 def detection_limits(report: Mapping[str, Any]) -> str:
