@@ -132,6 +132,7 @@ class OffscreenContext:
             try:
                 self._renderer = pyrender.OffscreenRenderer(self.width, self.height)
                 OffscreenContext._open += 1
+                _read_colour_only(self._renderer._renderer)
                 if self.mesh_shaders is not None:
                     self._renderer._renderer._program_cache = _mesh_shader_cache(*self.mesh_shaders)
             except Exception as exc:
@@ -160,6 +161,36 @@ class OffscreenContext:
             self.close()
         except Exception:
             pass
+
+
+def _read_colour_only(renderer: Any) -> None:
+    """Make a pyrender ``Renderer`` read back only the colour of each frame.
+
+    pyrender resolves and reads the depth buffer of every frame too, and converts it to
+    metres: a tenth of a 112-px flag frame's time on llvmpipe, for a buffer nothing here
+    uses. The colour is resolved and read exactly as pyrender does (the same calls, so the
+    same pixels); the depth returned is ``None``. Offscreen rendering on Linux only (macOS
+    rescales its buffers: pyrender's own reader is kept there).
+    """
+    import sys
+
+    if sys.platform == "darwin":
+        return
+    from OpenGL import GL
+    from pyrender.constants import RenderFlags
+
+    def read(scene: Any, flags: int) -> tuple[np.ndarray, None]:
+        width, height = renderer._main_fb_dims[0], renderer._main_fb_dims[1]
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb_ms)
+        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._main_fb)
+        GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._main_fb)
+        channels, layout = (4, GL.GL_RGBA) if flags & RenderFlags.RGBA else (3, GL.GL_RGB)
+        buffer = GL.glReadPixels(0, 0, width, height, layout, GL.GL_UNSIGNED_BYTE)
+        colour = np.frombuffer(buffer, dtype=np.uint8).reshape((height, width, channels))
+        return np.flip(colour, axis=0), None
+
+    renderer._read_main_framebuffer = read
 
 
 def _mesh_shader_cache(vertex: str, fragment: str) -> Any:

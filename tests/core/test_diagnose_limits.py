@@ -186,11 +186,12 @@ def _limits(
     seed=0,
     reveal=False,
     make_longer=None,
-    runner_for=None,
+    pooled_for=None,
+    log=None,
 ):
     """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor.
 
-    ``runner_for``: ``inputs -> run_tasks`` (the effects' tasks run elsewhere)."""
+    ``pooled_for``: ``inputs -> pooled`` (probes whose clips run elsewhere)."""
     from physinfer.loop import Pipeline
 
     phenomenon, renderer = pendulum
@@ -207,7 +208,7 @@ def _limits(
         diagnosis_simulations=300, make_longer=make_longer,
     )  # fmt: skip
     config = LimitConfig(seeds=seeds, fractions=fractions, reveal=reveal)
-    return detection_limits(inputs, config, run_tasks=None if runner_for is None else runner_for(inputs))
+    return detection_limits(inputs, config, log=log, pooled=None if pooled_for is None else pooled_for(inputs))
 
 
 def _drag_limit(pendulum, jitter: float, n_frames: int, *, seeds=2, seed=0) -> float:
@@ -340,90 +341,95 @@ def test_an_effect_hidden_by_its_own_randomness_has_no_limit(pendulum):
     assert top["floor"] > 4 * hum["rungs"][0]["floor"]  # its own noise grows with its strength
 
 
-def test_effect_tasks_run_elsewhere_give_the_limits_of_one_process(pendulum):
-    """The ladder's per-effect tasks (what ``diagnose`` sends to its workers) are plain data:
-    pickled, run with a fresh probe each, they give the limits and simulation count of the
-    ladder run here, effect by effect."""
-    import pickle
+class _StandInWorker:
+    """An executor standing in for the diagnosis' worker processes: each clip job runs on one
+    thread of its own, with a renderer made there (an EGL context belongs to a thread), the
+    models looked up by the job's effects. ``dies_on``: effects whose jobs fail, as when
+    the worker running them dies."""
 
+    def __init__(self, simulators, embedder, dies_on=()):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.simulators, self.embedder, self.dies_on = simulators, embedder, set(dies_on)
+        self.thread = ThreadPoolExecutor(max_workers=1)
+        self.renderer = None
+        self.jobs = 0
+
+    def submit(self, fn, job):
+        from concurrent.futures import Future
+        from concurrent.futures.process import BrokenProcessPool
+
+        if self.dies_on & set(job.effects):
+            future = Future()
+            future.set_exception(BrokenProcessPool(f"the worker running {job.effects[0]} died"))
+            return future
+        self.jobs += 1
+        return self.thread.submit(self._clip, job)
+
+    def _clip(self, job):
+        from pendulum_example.render import PendulumRenderer
+
+        self.renderer = self.renderer or PendulumRenderer()
+        trajectory = self.simulators[job.effects].simulate(dict(job.params), seed=job.seed)
+        embedding = self.embedder.embed(self.renderer.render(trajectory, job.render_params))
+        return embedding.astype(float), None, trajectory.vertices.shape[0] / trajectory.fps
+
+    def close(self):
+        if self.renderer is not None:
+            self.thread.submit(self.renderer.close).result()
+        self.thread.shutdown()
+
+
+def _pooled_limits(args, worker, said=None):
+    from physinfer.discrepancy.clip_jobs import PooledProbe
+
+    def pooled_for(inputs):
+        return lambda keep: PooledProbe(inputs.base, inputs.render_params, worker, settings=None, keep_trajectories=keep)
+
+    try:
+        return _limits(*args, fractions=(0.5, 1.0), pooled_for=pooled_for, log=None if said is None else said.append)
+    finally:
+        worker.close()
+
+
+def test_the_ladders_clips_on_workers_give_the_limits_of_one_process(pendulum):
+    """With pooled probes (``diagnose``'s workers) the Jacobian and every effect's chain of
+    rungs and refits run at once, each clip a job: the limits and simulation count are those
+    of the ladders run here one after another, to the last digit."""
     from pendulum_example.physics import QuadraticDrag
 
-    from physinfer.discrepancy.limits import effect_ladder
     from physinfer.embedders import GridSpectrumEmbedder
 
-    effect_sims = [("quadratic_drag", _jittery(0.1, 20, [QuadraticDrag()])), ("hum", _jittery(0.1, 20, [Hum()]))]
-    args = (pendulum, _jittery(0.1, 20), effect_sims, GridSpectrumEmbedder(n_frames=20))
+    drag, hum, base = _jittery(0.1, 20, [QuadraticDrag()]), _jittery(0.1, 20, [Hum()]), _jittery(0.1, 20)
+    embedder = GridSpectrumEmbedder(n_frames=20)
+    args = (pendulum, base, [("quadratic_drag", drag), ("hum", hum)], embedder)
     here = _limits(*args, fractions=(0.5, 1.0))
-
-    def runner_for(inputs):
-        def elsewhere(tasks):
-            results = []
-            for task in tasks:
-                task = pickle.loads(pickle.dumps(task))
-                probe = Probe(inputs.base, inputs.render_params)
-                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
-                results.append(pickle.loads(pickle.dumps((limit, ladder, probe.simulations))))
-            return results
-
-        return elsewhere
-
-    there = _limits(*args, fractions=(0.5, 1.0), runner_for=runner_for)
+    worker = _StandInWorker({(): base, ("quadratic_drag",): drag, ("hum",): hum}, embedder)
+    there = _pooled_limits(args, worker)
     for name in ("quadratic_drag", "hum"):
         assert there["effects"][name] == here["effects"][name], name
-    assert there["simulations"] == here["simulations"]
+    assert there["simulations"] == here["simulations"] == worker.jobs
+    assert there["clip_seconds"] == here["clip_seconds"]
 
 
 def test_a_ladder_that_fails_on_a_worker_runs_here_with_the_same_limits(pendulum):
-    """A worker that dies (or cannot rebuild the model) loses no limit: ``limit_runner`` says
-    which ladder failed and hands it back as ``None``, and ``detection_limits`` runs it here,
-    beside the ladders that came back, to the limits of one process."""
-    from concurrent.futures import Future
-    from concurrent.futures.process import BrokenProcessPool
-    from types import SimpleNamespace
-
+    """A worker that dies (or cannot rebuild the model) loses no limit: the chain whose clip
+    failed is said and run here after the others came back, to the limits of one process."""
     from pendulum_example.physics import QuadraticDrag
 
-    from physinfer.discrepancy.limits import effect_ladder
-    from physinfer.discrepancy.parallel import limit_runner
     from physinfer.embedders import GridSpectrumEmbedder
 
-    effect_sims = [("quadratic_drag", _jittery(0.1, 20, [QuadraticDrag()])), ("hum", _jittery(0.1, 20, [Hum()]))]
-    args = (pendulum, _jittery(0.1, 20), effect_sims, GridSpectrumEmbedder(n_frames=20))
+    drag, hum, base = _jittery(0.1, 20, [QuadraticDrag()]), _jittery(0.1, 20, [Hum()]), _jittery(0.1, 20)
+    embedder = GridSpectrumEmbedder(n_frames=20)
+    args = (pendulum, base, [("quadratic_drag", drag), ("hum", hum)], embedder)
     here = _limits(*args, fractions=(0.5, 1.0))
-
-    class DyingExecutor:
-        def submit(self, fn, job):
-            future = Future()
-            future.set_exception(BrokenProcessPool(f"the worker running {job.task.name} died"))
-            return future
-
-    pool = SimpleNamespace(
-        size=2, settings=SimpleNamespace(limit_config=SimpleNamespace(reveal=False)),
-        where=lambda: "2 test workers", executor=DyingExecutor,
-    )  # fmt: skip
     said: list[str] = []
-    failed = _limits(*args, fractions=(0.5, 1.0), runner_for=lambda _: limit_runner(pool, {"size": 48}, said.append))
+    worker = _StandInWorker({(): base, ("quadratic_drag",): drag, ("hum",): hum}, embedder, dies_on={"hum"})
+    failed = _pooled_limits(args, worker, said)
     assert "      hum's ladder failed on a worker (BrokenProcessPool: the worker running hum died); running it here" in said
-
-    def drag_there_hum_lost(inputs):
-        def run(tasks):
-            probe = Probe(inputs.base, inputs.render_params)
-            out = []
-            for task in tasks:
-                if task.name == "hum":
-                    out.append(None)
-                    continue
-                limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
-                out.append((limit, ladder, probe.simulations))
-            return out
-
-        return run
-
-    mixed = _limits(*args, fractions=(0.5, 1.0), runner_for=drag_there_hum_lost)
-    for result in (failed, mixed):
-        for name in ("quadratic_drag", "hum"):
-            assert result["effects"][name] == here["effects"][name], name
-        assert result["simulations"] == here["simulations"]
+    for name in ("quadratic_drag", "hum"):
+        assert failed["effects"][name] == here["effects"][name], name
+    assert failed["simulations"] == here["simulations"]
 
 
 def test_the_lower_scale_reading_reuses_the_refits_it_shares_with_the_first(pendulum, monkeypatch):

@@ -56,6 +56,27 @@ def test_rgba_render_has_coverage_alpha() -> None:
     np.testing.assert_array_equal(rgba[..., :3], rgb)
 
 
+def test_colour_only_readback_gives_pyrenders_pixels() -> None:
+    """The context reads back only the colour (no depth); pyrender's own reader, which
+    reads both, gives the same pixels, RGB and RGBA."""
+    import pyrender
+
+    scene, _ = triangle_scene(offset=0.1)
+    context = OffscreenContext(48, 40)
+    try:
+        ours = context.render(scene), context.render(scene, rgba=True)
+        renderer = context._renderer
+        own_reader = type(renderer._renderer)._read_main_framebuffer.__get__(renderer._renderer)
+        renderer._renderer._read_main_framebuffer = own_reader
+        theirs = renderer.render(scene)[0], renderer.render(scene, flags=pyrender.RenderFlags.RGBA)[0]
+    finally:
+        context.close()
+    assert ours[0].shape == (40, 48, 3) and ours[1].shape == (40, 48, 4)
+    np.testing.assert_array_equal(ours[0], theirs[0])
+    np.testing.assert_array_equal(ours[1], theirs[1])
+    assert ours[1][..., 3].max() == 255
+
+
 def test_update_vertices_reaches_the_gpu() -> None:
     moved_scene, _ = triangle_scene(offset=0.3)
     scene, primitive = triangle_scene()

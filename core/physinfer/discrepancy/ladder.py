@@ -62,19 +62,37 @@ def moved_values(effect_space: ParameterSpace, fraction: float) -> dict[str, flo
 
 
 class Probe:
-    """Simulate (batched), render and embed at the target's ζ; counts its simulations."""
+    """Simulate (batched), render and embed at the target's ζ; counts its simulations.
+
+    :meth:`clips` is what the ladders and refits call; a pooled probe
+    (:class:`~physinfer.discrepancy.clip_jobs.PooledProbe`) runs it on the diagnosis'
+    workers instead, one clip per job.
+    """
 
     def __init__(self, base: Pipeline, render_params: Mapping[str, Any]) -> None:
         self.base = base
         self.render_params = dict(render_params)
         self.simulations = 0
+        #: Seconds a simulated clip records (``None`` until one succeeds).
+        self.clip_seconds: float | None = None
+
+    def clips(
+        self, model: Pipeline, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+    ) -> tuple[np.ndarray, list[Any]]:
+        """``model``'s clips of ``params[j]`` under ``seeds[j]``, embedded at ζ: ``(N, D)``
+        embeddings (a row of NaN for a failed simulation) and the trajectories."""
+        trajectories = self.trajectories(model.simulator, params, seeds)
+        return self.embed(trajectories), trajectories
 
     def trajectories(
         self, simulator: Any, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
     ) -> list[Any]:
         """One batch through the simulator's engine (``None`` for a failed simulation)."""
         self.simulations += len(params)
-        return [t for t, _ in simulate_many(simulator, list(params), [int(s) for s in seeds])]
+        trajectories = [t for t, _ in simulate_many(simulator, list(params), [int(s) for s in seeds])]
+        if self.clip_seconds is None:
+            self.clip_seconds = next((t.vertices.shape[0] / t.fps for t in trajectories if t is not None), None)
+        return trajectories
 
     def embed(
         self,
@@ -85,21 +103,24 @@ class Probe:
         """``(N, D)`` embeddings (a row of NaN for a failed simulation)."""
         zeta = self.render_params if render_params is None else render_params
         embedder = embedder or self.base.embedder
-        rows: list[np.ndarray | None] = []
-        for traj in trajectories:
-            rows.append(
+        return stack_rows(
+            [
                 None
                 if traj is None
-                else np.asarray(
-                    embedder.embed(self.base.renderer.render(traj, zeta)), dtype=np.float64
-                )
-            )
-        width = next((r.size for r in rows if r is not None), 0)
-        return (
-            np.stack([np.full(width, np.nan) if r is None else r for r in rows])
-            if rows
-            else np.zeros((0, 0))
+                else np.asarray(embedder.embed(self.base.renderer.render(traj, zeta)), dtype=np.float64)
+                for traj in trajectories
+            ]
         )
+
+
+def stack_rows(rows: Sequence[np.ndarray | None]) -> np.ndarray:
+    """``(N, D)`` from embeddings, a row of NaN for each ``None`` (a failed simulation)."""
+    width = next((r.size for r in rows if r is not None), 0)
+    return (
+        np.stack([np.full(width, np.nan) if r is None else r for r in rows])
+        if rows
+        else np.zeros((0, 0))
+    )
 
 
 def cross_median(a: np.ndarray, b: np.ndarray) -> float:
@@ -144,10 +165,11 @@ def run_ladder(
     moved, held = strength_path(effect_space)
     values = [values_at(effect_space, moved, held, f) for f in fractions]
     jobs = [{**theta, **v} for v in values for _ in seeds]
-    trajs = probe.trajectories(augmented.simulator, jobs, list(seeds) * len(values))
+    embeddings, trajs = probe.clips(augmented, jobs, list(seeds) * len(values))
     n = len(seeds)
-    per_rung = [trajs[i * n : (i + 1) * n] for i in range(len(values))]
-    return Ladder(list(fractions), values, [probe.embed(t) for t in per_rung], per_rung)
+    rungs = range(len(values))
+    return Ladder(list(fractions), values, [embeddings[i * n : (i + 1) * n] for i in rungs],
+                  [trajs[i * n : (i + 1) * n] for i in rungs])  # fmt: skip
 
 
 def ladder_seeds(seed: int, n: int) -> list[int]:

@@ -139,9 +139,11 @@ def run_limits(
         scale_low=scale_low,
         n_candidates=n_candidates,
     )
-    from physinfer.discrepancy.parallel import limit_runner
+    from physinfer.discrepancy.parallel import pooled_probes
 
-    runner = limit_runner(pool, target.render_params, say)
-    limits = detection_limits(inputs, settings.limit_config, log=say, run_tasks=runner)
+    pooled = pooled_probes(pool, base, target.render_params)
+    if pooled is not None:
+        say(f"      the ladders' clips run on {pool.where()}")  # type: ignore[union-attr] - a pool
+    limits = detection_limits(inputs, settings.limit_config, log=say, pooled=pooled)
     atomic_write_json(path, {"key": key, "limits": limits})
     return json.loads(path.read_text())["limits"]  # as a resumed diagnosis reads it (NaN as null)

@@ -187,7 +187,7 @@ def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -
 @dataclass(frozen=True)
 class EffectTask:
     """One effect's share of the ladder — its rungs, limit and ``--fix`` what-ifs — as plain
-    data, so that a worker process can run it (:func:`effect_ladder`).
+    data (:func:`effect_ladder` runs it; each in a thread of its own with pooled probes).
 
     Attributes:
         name: The effect.
@@ -236,18 +236,19 @@ def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[
     return limit, ladder
 
 
-#: Runs effect tasks elsewhere (worker processes): returns, in order, each task's limit
-#: record, ladder and simulation count, or ``None`` for a task that failed there.
-TaskRunner = Callable[[list[EffectTask]], list[tuple[dict[str, Any], Ladder, int] | None]]
+#: Makes a probe whose clips run on the diagnosis' workers, one job per clip
+#: (:class:`~physinfer.discrepancy.clip_jobs.PooledProbe`); its argument: keep the trajectories.
+ProbeFactory = Callable[[bool], Probe]
 
 
 def detection_limits(
-    inputs: LimitInputs, config: LimitConfig, *, log: Log | None = None, run_tasks: TaskRunner | None = None
+    inputs: LimitInputs, config: LimitConfig, *, log: Log | None = None, pooled: ProbeFactory | None = None
 ) -> dict[str, Any]:
     """Every candidate's detection limit at θ̂, and what would lower it.
 
-    ``run_tasks``: runs the effects' tasks side by side (the limits are the same: every
-    task's seeds are its own); ``None``: one after another here.
+    ``pooled``: the Jacobian and every effect's ladder run at once, each in a thread whose
+    clips go to the workers (the limits are the same: every clip's seed is its own); what
+    fails there runs here after. ``None``: one after another here.
 
     Returns:
         ``effects`` (name → :func:`~physinfer.discrepancy.limit_rule.effect_limit`'s result with
@@ -255,6 +256,8 @@ def detection_limits(
         ``seeds``, ``refit_seeds``, ``deterministic``, ``simulations`` (the ladder's),
         ``diagnosis_simulations``, ``share``, ``config``, ``clip_seconds``, ``wall_time_s``.
     """
+    from physinfer.discrepancy.clip_jobs import concurrently
+
     say = log or (lambda _msg: None)
     start = time.perf_counter()
     probe = Probe(inputs.base, inputs.render_params)
@@ -267,8 +270,17 @@ def detection_limits(
     refit_seeds = ladder_seeds(inputs.seed + 1, n)
     space: ParameterSpace = inputs.base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
-    jac, jac_trajs = jacobian(probe, theta, base_emb, refit_seeds, config.step)
-    seconds = next((t.vertices.shape[0] / t.fps for t in jac_trajs if t is not None), None)
+    keep = config.reveal  # another view's what-if re-renders the clips
+
+    def jacobian_with(p: Probe) -> tuple[np.ndarray, list[Any], Probe]:
+        return (*jacobian(p, theta, base_emb, refit_seeds, config.step), p)
+
+    found = concurrently(jacobian_with, [pooled(keep)], ["the Jacobian"], say)[0] if pooled else None
+    jac, jac_trajs, jac_probe = found or jacobian_with(probe)
+    if jac_probe is not probe:
+        probe.simulations += jac_probe.simulations
+    seconds = jac_probe.clip_seconds
+
     def thresholds_at(scale: float) -> dict[str, Threshold]:
         return {
             name: Threshold.of(
@@ -285,8 +297,14 @@ def detection_limits(
                    tuple(refit_seeds), deterministic, low.get(name))  # fmt: skip
         for name in inputs.augmented
     ]
-    # Tasks run elsewhere come back with their results; the rest (or one that failed there) run here.
-    results = run_tasks(tasks) if run_tasks is not None else [None] * len(tasks)
+
+    def on_workers(task: EffectTask) -> tuple[dict[str, Any], Ladder, int]:
+        p = pooled(keep)  # type: ignore[misc] - only called with a factory
+        return (*effect_ladder(p, inputs.augmented[task.name], task), p.simulations)
+
+    # The ladders run on the workers at once; the rest (or one that failed there) run here.
+    labels = [f"{task.name}'s ladder" for task in tasks]
+    results = concurrently(on_workers, tasks, labels, say) if pooled else [None] * len(tasks)
     for i, task in enumerate(tasks):
         if results[i] is None:
             before = probe.simulations

@@ -14,11 +14,11 @@ simulations are seeded by the stage alone).
 A job that fails on a worker is only reported: the workflow runs that stage itself and
 meets the failure (or not) where it would have without workers.
 
-The detection limits' ladders run the same way, one job per effect (:func:`limit_runner`):
-each effect's rungs and refits have their own seeds, so the limits do not depend on where
-they ran. One :class:`WorkerPool` serves every round of a diagnosis (the stages, the
-self-consistency runs the decisions ask for, the ladders): its processes start once and keep
-the models they built.
+The screen's and the detection limits' ladders use the same workers one clip at a time
+(:func:`pooled_probes`, :mod:`physinfer.discrepancy.clip_jobs`): every clip has its own seed,
+so the limits do not depend on where they ran. One :class:`WorkerPool` serves every round of
+a diagnosis (the stages, the self-consistency runs the decisions ask for, the ladders): its
+processes start once and keep the models they built.
 
 Workers build the plugins from their entry points (:func:`physinfer.plugins.load_registry`),
 or with the settings' ``registry_factory`` when one is given: a registry assembled in code
@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.stages import (
     GapContext,
@@ -53,7 +52,7 @@ from physinfer.progress import StageProgress
 from physinfer.roles import Target
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.limits import EffectTask, TaskRunner
+    from physinfer.discrepancy.limits import ProbeFactory
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
@@ -361,64 +360,12 @@ def _logged_trials(path: Any) -> int:
         return 0
 
 
-@dataclass(frozen=True)
-class LimitJob:
-    """One effect's detection-limit ladder (:class:`~physinfer.discrepancy.limits.EffectTask`)
-    for a worker, with what it needs to rebuild the models."""
-
-    settings: DiagnoseSettings
-    render_params: Mapping[str, Any]
-    task: EffectTask
-    keep_trajectories: bool
-
-
-def run_limit_job(job: LimitJob) -> tuple[dict[str, Any], Any, int]:
-    """Run one effect's ladder in this (worker) process: its limit, ladder and simulations."""
-    from physinfer.discrepancy.ladder import Probe
-    from physinfer.discrepancy.limits import effect_ladder
-    from physinfer.session import fixed_by_user
-    from physinfer.threads import refinement_torch_threads, torch_threads
-
-    registry, base = worker_pipeline(job.settings)
-    effect = registry.effect(job.task.name, phenomenon=base.phenomenon.name)
-    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
-    probe = Probe(base, job.render_params)
-    with torch_threads(refinement_torch_threads()):
-        limit, ladder = effect_ladder(probe, augmented, job.task)
-    if not job.keep_trajectories:  # only another view's what-if re-renders them: not worth the transfer
-        ladder.trajectories = []
-    return limit, ladder, probe.simulations
-
-
-def limit_runner(pool: WorkerPool | None, render_params: Mapping[str, Any], say: Log) -> TaskRunner | None:
-    """Run the effects' ladders side by side on the pool (``None``: it has one worker or fewer).
-
-    A task that fails on a worker comes back as ``None`` and is run in this process."""
+def pooled_probes(pool: WorkerPool | None, base: Any, render_params: Mapping[str, Any]) -> ProbeFactory | None:
+    """Probes whose clips run on the pool's workers, one job per clip (``None``: it has one
+    worker or fewer; see :mod:`physinfer.discrepancy.clip_jobs`)."""
     if pool is None or pool.size < 2:
         return None
-    settings = pool.settings
+    from physinfer.discrepancy.clip_jobs import PooledProbe
 
-    def run(tasks: list[EffectTask]) -> list[Any]:
-        say(f"      the {len(tasks)} effects' ladders run side by side on {pool.where()}")
-        keep = settings.limit_config.reveal
-        jobs = [LimitJob(settings, dict(render_params), t, keep) for t in tasks]
-        return side_by_side(pool, run_limit_job, jobs, [f"{t.name}'s ladder" for t in tasks], say)
-
-    return run
-
-
-def side_by_side(pool: WorkerPool, function: Callable[[Any], Any], jobs: Sequence[Any], labels: Sequence[str],
-                 say: Log) -> list[Any]:  # fmt: skip
-    """``function(job)`` for every job on the pool's workers, in order; ``None`` for a job that
-    failed there (its ``label`` is logged), for the caller to run in this process, where it
-    fails (or not) as it would alone."""
-    executor = pool.executor()
-    futures = [executor.submit(function, job) for job in jobs]
-    results = []
-    for label, future in zip(labels, futures, strict=True):
-        try:
-            results.append(future.result())
-        except Exception as exc:  # noqa: BLE001 - the caller runs it here instead
-            say(f"      {label} failed on a worker ({type(exc).__name__}: {exc}); running it here")
-            results.append(None)
-    return results
+    executor, settings = pool.executor(), pool.settings
+    return lambda keep: PooledProbe(base, render_params, executor, settings, keep_trajectories=keep)

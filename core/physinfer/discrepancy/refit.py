@@ -27,7 +27,6 @@ def jacobian(
     base_embeddings: np.ndarray,
     seeds: Sequence[int],
     step: float,
-    simulator: Any = None,
 ) -> tuple[np.ndarray, list[Any]]:
     """Forward-difference Jacobian ``(D_e, P)`` of the mean embedding in normalised coordinates.
 
@@ -35,7 +34,6 @@ def jacobian(
     takes the mean over ``seeds`` minus the mean of ``base_embeddings``. Returns the
     Jacobian and the trajectories (for re-rendering from another view).
     """
-    simulator = simulator or probe.base.simulator
     space: ParameterSpace = probe.base.simulator.parameter_space
     u0 = space.to_unit(space.complete(theta))
     jobs, signs = [], []
@@ -45,8 +43,8 @@ def jacobian(
         u[d] += sign * step
         jobs += [space.from_unit(u)] * len(seeds)
         signs.append(sign)
-    trajs = probe.trajectories(simulator, jobs, list(seeds) * len(space))
-    return jacobian_from(probe.embed(trajs), base_embeddings, signs, len(seeds), step), trajs
+    embeddings, trajs = probe.clips(probe.base, jobs, list(seeds) * len(space))
+    return jacobian_from(embeddings, base_embeddings, signs, len(seeds), step), trajs
 
 
 def jacobian_from(
@@ -162,7 +160,7 @@ def measured_refit(
         if any(np.max(np.abs(u - p)) < 1e-3 for p, _ in points):
             return
         params = space.from_unit(u)
-        emb = probe.embed(probe.trajectories(probe.base.simulator, [params] * len(seeds), seeds))
+        emb, _ = probe.clips(probe.base, [params] * len(seeds), seeds)
         state.broyden(u - origin[0], np.nanmean(emb, axis=0) - np.nanmean(origin[1], axis=0))
         points.append((u, emb))
 

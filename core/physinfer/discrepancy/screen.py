@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -64,40 +63,6 @@ Log = Callable[[str], None]
 #: Seeds per rung: the fewest the ladder uses on a chaotic phenomenon (two clips give a floor).
 SCREEN_SEEDS = 2
 SCREEN_FILE = "screen.json"
-
-
-@dataclass(frozen=True)
-class ScreenJob:
-    """One effect's rungs at θ̂, for a worker (plain data: it rebuilds the models)."""
-
-    settings: DiagnoseSettings
-    render_params: Mapping[str, Any]
-    name: str
-    theta: dict[str, float]
-    fractions: tuple[float, ...]
-    seeds: tuple[int, ...]
-
-
-def run_screen_job(job: ScreenJob) -> Ladder:
-    """Simulate one effect's rungs in this (worker) process (its clips left behind)."""
-    from physinfer.discrepancy.parallel import worker_pipeline
-    from physinfer.threads import refinement_torch_threads, torch_threads
-
-    registry, base = worker_pipeline(job.settings)
-    with torch_threads(refinement_torch_threads()):
-        ladder = _rungs(job, base, registry.effect(job.name, phenomenon=base.phenomenon.name))
-    ladder.trajectories = []  # only the embeddings are read: not worth the transfer
-    return ladder
-
-
-def _rungs(job: ScreenJob, base: Pipeline, effect: Any) -> Ladder:
-    """``job``'s rungs with ``base`` and ``effect`` switched in."""
-    from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.session import fixed_by_user
-
-    augmented = augmented_pipeline(base, [effect], job.settings.duration_s, fixed_by_user(base, job.settings.fixed))
-    return run_ladder(Probe(base, job.render_params), augmented, job.theta, effect.parameter_space,
-                      job.fractions, job.seeds)  # fmt: skip
 
 
 def judge_rungs(
@@ -217,15 +182,27 @@ def _simulate(
     say: Log,
     pool: WorkerPool | None,
 ) -> dict[str, Ladder]:
-    """The rungs at ``fractions`` of each effect in ``names``: side by side on the pool's workers
-    when it has two or more; a job that fails there (or every job without them) runs here."""
-    from physinfer.discrepancy.parallel import side_by_side
+    """The rungs at ``fractions`` of each effect in ``names``: all at once, each clip a job on
+    the pool's workers when it has two or more; an effect whose clips fail there (or every
+    effect without them) is simulated here."""
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.discrepancy.clip_jobs import concurrently
+    from physinfer.discrepancy.parallel import pooled_probes
+    from physinfer.session import fixed_by_user
 
-    jobs = [ScreenJob(settings, dict(render_params), name, theta, fractions, seeds) for name in names]
-    results: list[Ladder | None] = [None] * len(jobs)
-    if pool is not None and pool.size >= 2 and len(jobs) >= 2:
-        results = side_by_side(pool, run_screen_job, jobs, [f"{job.name}'s screen" for job in jobs], say)
+    fixed = fixed_by_user(base, settings.fixed)
+    models = {name: augmented_pipeline(base, [effect_objs[name]], settings.duration_s, fixed) for name in names}
+
+    def rungs(name: str, probe: Probe) -> Ladder:
+        space = effect_objs[name].parameter_space
+        return run_ladder(probe, models[name], theta, space, fractions, seeds)
+
+    pooled = pooled_probes(pool, base, render_params)
+    ladders: list[Ladder | None] = [None] * len(names)
+    if pooled is not None:
+        ladders = concurrently(lambda name: rungs(name, pooled(False)), list(names),
+                               [f"{name}'s screen" for name in names], say)  # fmt: skip
     return {
-        job.name: ladder if ladder is not None else _rungs(job, base, effect_objs[job.name])
-        for job, ladder in zip(jobs, results, strict=True)
+        name: ladder if ladder is not None else rungs(name, Probe(base, render_params))
+        for name, ladder in zip(names, ladders, strict=True)
     }

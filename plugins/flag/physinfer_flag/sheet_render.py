@@ -130,22 +130,25 @@ class DoubleSidedSheet:
         self._corner_vertex = self.faces.ravel()
 
     def vertex_normals(self, positions: np.ndarray) -> np.ndarray:
-        """Area-weighted unit vertex normals ``(V, 3)`` of the front side."""
+        """Area-weighted unit vertex normals ``(V, 3)`` of the front side (``(T, V, 3)`` for
+        ``T`` frames at once: the same numbers as frame by frame, to the last bit)."""
         p = positions.astype(np.float64)
-        a, b, c = p[self.faces[:, 0]], p[self.faces[:, 1]], p[self.faces[:, 2]]
+        frames = p.reshape((-1, *p.shape[-2:]))
+        a, b, c = (frames[:, self.faces[:, i]] for i in range(3))
         face_normals = np.cross(b - a, c - a)  # length = twice the area: area weighting
-        corner = np.repeat(face_normals, 3, axis=0)
-        normals = np.stack(
-            [np.bincount(self._corner_vertex, corner[:, k], minlength=self.n_vertices) for k in range(3)], axis=1
-        )
+        corner = np.repeat(face_normals, 3, axis=1).reshape(-1, 3)
+        # Each frame's corners sum into its own bins, in the order a single frame's would.
+        bins = (np.arange(len(frames))[:, None] * self.n_vertices + self._corner_vertex[None, :]).ravel()
+        size = len(frames) * self.n_vertices
+        normals = np.stack([np.bincount(bins, corner[:, k], minlength=size) for k in range(3)], axis=1)
         norm = np.linalg.norm(normals, axis=1, keepdims=True)
-        return normals / np.maximum(norm, 1e-12)
+        return (normals / np.maximum(norm, 1e-12)).reshape(p.shape)
 
     def buffers(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Positions and normals ``(2V, 3)`` float32 for both sides."""
+        """Positions and normals ``(2V, 3)`` float32 for both sides (``(T, 2V, 3)`` for ``T`` frames)."""
         normals = self.vertex_normals(positions)
-        both_positions = np.concatenate([positions, positions]).astype(np.float32)
-        both_normals = np.concatenate([normals, -normals]).astype(np.float32)
+        both_positions = np.concatenate([positions, positions], axis=-2).astype(np.float32)
+        both_normals = np.concatenate([normals, -normals], axis=-2).astype(np.float32)
         return both_positions, both_normals
 
 
@@ -258,6 +261,10 @@ def context_of_size(
     return OffscreenContext(width, height, mesh_shaders=mesh_shaders)
 
 
+#: Frames composited at once (bounds the buffer of renders awaiting their background).
+_COMPOSITE_FRAMES = 32
+
+
 def render_sheet(
     context: OffscreenContext,
     scene: Any,
@@ -280,10 +287,17 @@ def render_sheet(
         Clip of ``(T, H, W, 3)`` uint8 frames at ``trajectory.fps``.
     """
     height, width = background.shape[:2]
+    # Every frame's buffers at once and the compositing by blocks of frames: only the upload
+    # and the draw itself are left per frame (the same pixels as frame by frame).
+    positions, normals = sheet.buffers(np.asarray(trajectory.vertices))
     frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
-    for index, positions in enumerate(trajectory.vertices):
-        context.update_vertices(primitive, *sheet.buffers(positions))
-        frames[index] = composite_over(context.render(scene, rgba=True), background)
+    rgba = np.empty((min(trajectory.n_frames, _COMPOSITE_FRAMES), height, width, 4), dtype=np.uint8)
+    for index in range(trajectory.n_frames):
+        context.update_vertices(primitive, positions[index], normals[index])
+        rgba[index % _COMPOSITE_FRAMES] = context.render(scene, rgba=True)
+        if index % _COMPOSITE_FRAMES == _COMPOSITE_FRAMES - 1 or index == trajectory.n_frames - 1:
+            done = slice(index - index % _COMPOSITE_FRAMES, index + 1)
+            frames[done] = composite_over(rgba[: done.stop - done.start], background)
     return Clip(frames, float(trajectory.fps))
 
 
@@ -291,12 +305,12 @@ def composite_over(rgba: np.ndarray, background: np.ndarray) -> np.ndarray:
     """Put a premultiplied RGBA render over an opaque background.
 
     Args:
-        rgba: ``(H, W, 4)`` uint8, colour premultiplied by alpha (how a multisampled
-            render cleared to transparent black comes out).
+        rgba: ``(..., H, W, 4)`` uint8, colour premultiplied by alpha (how a multisampled
+            render cleared to transparent black comes out): one frame or many.
         background: ``(H, W, 3)`` uint8.
 
     Returns:
-        ``(H, W, 3)`` uint8.
+        ``(..., H, W, 3)`` uint8.
     """
     alpha = rgba[..., 3:4].astype(np.uint16)
     blended = rgba[..., :3].astype(np.uint16) + (background.astype(np.uint16) * (255 - alpha) + 127) // 255

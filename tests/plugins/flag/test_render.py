@@ -342,6 +342,22 @@ def test_double_sided_sheet_normals_point_both_ways() -> None:
     assert double.indices.shape == (2 * len(sheet.faces), 3)
 
 
+def test_buffers_and_compositing_of_many_frames_equal_frame_by_frame() -> None:
+    """``render_sheet`` computes every frame's buffers at once and composites blocks of
+    frames: the same numbers as one frame at a time, to the last bit."""
+    sheet = waving_sheet(n_frames=7)
+    double = DoubleSidedSheet(sheet.faces, sheet.vertices.shape[1])
+    positions, normals = double.buffers(sheet.vertices)
+    for t in range(7):
+        one_positions, one_normals = double.buffers(sheet.vertices[t])
+        np.testing.assert_array_equal(positions[t], one_positions)
+        np.testing.assert_array_equal(normals[t], one_normals)
+    rng = np.random.default_rng(0)
+    rgba = rng.integers(0, 256, (7, 5, 6, 4), dtype=np.uint8)
+    background = rng.integers(0, 256, (5, 6, 3), dtype=np.uint8)
+    np.testing.assert_array_equal(composite_over(rgba, background), [composite_over(f, background) for f in rgba])
+
+
 def test_composite_over_blends_premultiplied_edges() -> None:
     rgba = np.array([[[0, 0, 0, 0], [200, 100, 0, 255], [100, 50, 0, 128]]], dtype=np.uint8)
     background = np.full((1, 3, 3), 100, dtype=np.uint8)
