@@ -128,7 +128,9 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     clip = pipeline.renderer.render(pipeline.simulator.simulate(truth, seed=1000 + seed), zeta)
     pipeline.renderer.close()
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_video(path, clip)
+    # Lossless: a lossy encoding of the same frames differed from run to run (physinfer.video),
+    # and with it every trial of the case's diagnosis.
+    write_video(path, clip, lossless=True)
     return truth
 
 

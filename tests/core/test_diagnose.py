@@ -513,3 +513,30 @@ def test_workers_find_the_effects_of_a_phenomenon_registered_under_another_name(
     not_installed = DiagnoseSettings(plugin="pendulum_alias", out=tmp_path, workers=2)
     workers, why = usable_workers(not_installed, 3, ["quadratic_drag"])
     assert workers == 1 and "not installed" in why
+
+
+def test_a_calibration_target_is_encoded_once_and_read_back(tmp_path: Path, monkeypatch):
+    """The encoder does not repeat itself: a self-consistency target encoded again (the main
+    process reading a worker's stage, a resumed diagnosis) gave its stage another embedding,
+    whose resume was refused. It is encoded once and read back after; another θ re-encodes."""
+    import physinfer.video as video
+    from physinfer.discrepancy.stages import calibration_target
+    from physinfer.plugins import load_registry
+    from physinfer.roles import Target
+    from physinfer.session import build_pipeline
+
+    registry, _ = load_registry()
+    pipeline = build_pipeline(registry, "pendulum", embedder="")
+    target = Target(None, None, {"size": 48}, "test")
+    theta = {"length": 1.0, "damping": 0.1, "amplitude": 40.0}
+    writes = []
+    write = video.write_video
+    monkeypatch.setattr(video, "write_video", lambda *a, **k: writes.append(a[0]) or write(*a, **k))
+    first = calibration_target(pipeline, theta, target, 7, tmp_path / "calibration-0")
+    again = calibration_target(pipeline, theta, target, 7, tmp_path / "calibration-0")
+    assert len(writes) == 1
+    np.testing.assert_array_equal(first.clip.frames, again.clip.frames)
+    assert again.clip.fps == first.clip.fps
+    calibration_target(pipeline, {**theta, "length": 1.2}, target, 7, tmp_path / "calibration-0")
+    assert len(writes) == 2
+    pipeline.renderer.close()

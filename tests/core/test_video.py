@@ -50,6 +50,19 @@ def test_mp4_round_trip_keeps_frames_within_codec_tolerance(tmp_path: Path) -> N
         assert clip.frames[t, 20:28, x0 + 2 : x0 + 10].min() > 200
 
 
+def test_lossless_mp4_reads_back_the_frames_exactly(tmp_path: Path) -> None:
+    """``lossless=True`` (benchmark targets): an mp4 whose frames read back bit for bit, so
+    a target made twice is the same target."""
+    rng = np.random.default_rng(4)
+    frames = np.clip(moving_pattern(n_frames=6).astype(int) + rng.integers(-9, 10, (6, 48, 64, 3)), 0, 255)
+    frames = frames.astype(np.uint8)
+    first = read_video(write_video(tmp_path / "a.mp4", Clip(frames, 25.0), lossless=True))
+    again = read_video(write_video(tmp_path / "b.mp4", frames, fps=25.0, lossless=True))
+    assert first.fps == pytest.approx(25.0)
+    np.testing.assert_array_equal(first.frames, frames)
+    np.testing.assert_array_equal(again.frames, frames)
+
+
 def test_clip_object_and_odd_frame_size_can_be_written(tmp_path: Path) -> None:
     frames = moving_pattern(n_frames=5, height=33, width=45)
     write_video(tmp_path / "odd.mp4", Clip(frames, 30.0))

@@ -29,6 +29,8 @@ import numpy as np
 from physinfer.discrepancy.ladder import Probe, stack_rows
 
 if TYPE_CHECKING:
+    from physinfer.discrepancy.limits import ProbeFactory
+    from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
     from physinfer.loop import Pipeline
 
@@ -139,6 +141,15 @@ class PooledProbe(Probe):
         if self.clip_seconds is None:
             self.clip_seconds = next((sec for _, _, sec in results if sec is not None), None)
         return stack_rows([emb for emb, _, _ in results]), [traj for _, traj, _ in results]
+
+
+def pooled_probes(pool: WorkerPool | None, base: Pipeline, render_params: Mapping[str, Any]) -> ProbeFactory | None:
+    """Probes whose clips run on the pool's workers, one job per clip (``None``: it has one
+    worker or fewer)."""
+    if pool is None or pool.size < 2:
+        return None
+    executor, settings = pool.executor(), pool.settings
+    return lambda keep: PooledProbe(base, render_params, executor, settings, keep_trajectories=keep)
 
 
 def concurrently(

@@ -139,7 +139,7 @@ def run_limits(
         scale_low=scale_low,
         n_candidates=n_candidates,
     )
-    from physinfer.discrepancy.parallel import pooled_probes
+    from physinfer.discrepancy.clip_jobs import pooled_probes
 
     pooled = pooled_probes(pool, base, target.render_params)
     if pooled is not None:

@@ -15,7 +15,7 @@ A job that fails on a worker is only reported: the workflow runs that stage itse
 meets the failure (or not) where it would have without workers.
 
 The screen's and the detection limits' ladders use the same workers one clip at a time
-(:func:`pooled_probes`, :mod:`physinfer.discrepancy.clip_jobs`): every clip has its own seed,
+(:func:`physinfer.discrepancy.clip_jobs.pooled_probes`): every clip has its own seed,
 so the limits do not depend on where they ran. One :class:`WorkerPool` serves every round of
 a diagnosis (the stages, the self-consistency runs the decisions ask for, the ladders): its
 processes start once and keep the models they built.
@@ -52,7 +52,6 @@ from physinfer.progress import StageProgress
 from physinfer.roles import Target
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.limits import ProbeFactory
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
 Log = Callable[[str], None]
@@ -358,14 +357,3 @@ def _logged_trials(path: Any) -> int:
             return sum(1 for _ in fh)
     except OSError:
         return 0
-
-
-def pooled_probes(pool: WorkerPool | None, base: Any, render_params: Mapping[str, Any]) -> ProbeFactory | None:
-    """Probes whose clips run on the pool's workers, one job per clip (``None``: it has one
-    worker or fewer; see :mod:`physinfer.discrepancy.clip_jobs`)."""
-    if pool is None or pool.size < 2:
-        return None
-    from physinfer.discrepancy.clip_jobs import PooledProbe
-
-    executor, settings = pool.executor(), pool.settings
-    return lambda keep: PooledProbe(base, render_params, executor, settings, keep_trajectories=keep)

@@ -186,8 +186,7 @@ def _simulate(
     the pool's workers when it has two or more; an effect whose clips fail there (or every
     effect without them) is simulated here."""
     from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.discrepancy.clip_jobs import concurrently
-    from physinfer.discrepancy.parallel import pooled_probes
+    from physinfer.discrepancy.clip_jobs import concurrently, pooled_probes
     from physinfer.session import fixed_by_user
 
     fixed = fixed_by_user(base, settings.fixed)

@@ -188,21 +188,45 @@ def calibration_target(
 
     With ``encode_dir`` the clip makes a round trip through the video encoder, as a target
     read from a file did: compression changes the pixels, and a self-consistency target
-    without it would be easier to match than the real one.
+    without it would be easier to match than the real one. The encoded target is kept
+    (``self_target.mp4`` with its key in ``self_target.json``) and read back by whoever
+    makes it again — the main process reading a worker's stage, a resumed diagnosis: the
+    encoder does not repeat itself (:func:`physinfer.video.write_video`), and a target
+    encoded anew gave the stage another embedding, which its resume refused.
     """
-    clip = clip_of(pipeline, params, target, seed)
-    if encode_dir is not None:
-        from physinfer.video import read_video, write_video
-
-        encode_dir.mkdir(parents=True, exist_ok=True)
-        path = write_video(encode_dir / "self_target.mp4", clip)
-        clip = read_video(path, fps=clip.fps)
+    if encode_dir is None:
+        clip = clip_of(pipeline, params, target, seed)
+    else:
+        clip = _encoded_once(encode_dir, pipeline, params, target, seed)
     return Target(
         clip,
         dict(params),
         dict(target.render_params),
         "self-consistency target at the baseline fit",
     )
+
+
+def _encoded_once(
+    encode_dir: Path, pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int
+) -> Any:
+    """The calibration target's clip after its round trip through the encoder, made once."""
+    import json
+
+    from physinfer.io import atomic_write_json
+    from physinfer.video import read_video, write_video
+
+    path, key_path = encode_dir / "self_target.mp4", encode_dir / "self_target.json"
+    key = {"params": {k: float(v) for k, v in params.items()}, "seed": int(seed),
+           "render_params": dict(target.render_params)}  # fmt: skip
+    if path.is_file() and key_path.is_file():
+        stored = json.loads(key_path.read_text())
+        if stored.get("key") == json.loads(json.dumps(key)):
+            return read_video(path, fps=stored["fps"])
+    clip = clip_of(pipeline, params, target, seed)
+    encode_dir.mkdir(parents=True, exist_ok=True)
+    write_video(path, clip)
+    atomic_write_json(key_path, {"key": key, "fps": float(clip.fps)})
+    return read_video(path, fps=clip.fps)
 
 
 #: Step between the optimizer seeds of successive calibration runs: any step keeps them
