@@ -115,13 +115,14 @@ def target(tmp_path_factory) -> Path:
     return write_video(tmp_path_factory.mktemp("screen") / "target.mp4", clip)
 
 
-def _diagnose(out: Path, target: Path, screen: bool) -> dict:
+def _diagnose(out: Path, target: Path, screen: bool, **kw) -> dict:
     from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
 
+    kw = {"limits": False, "workers": 1, **kw}
     settings = DiagnoseSettings(
         plugin="pendulum_jitter", out=out, target_path=target, render_set={"size": 48}, steps=3,
-        optimizer="random", floor_samples=4, calibration_runs=1, videos=False, limits=False, workers=1,
-        effects=("quadratic_drag", "inert"), screen=screen,
+        optimizer="random", floor_samples=4, calibration_runs=1, videos=False,
+        effects=("quadratic_drag", "inert"), screen=screen, **kw,
     )  # fmt: skip
     return run_diagnosis(_registry(), settings)
 
@@ -154,6 +155,23 @@ def test_a_diagnosis_leaves_out_the_effect_no_fit_could_name(tmp_path: Path, tar
     # A re-run resumes the screen from screen.json (nothing re-simulated, the same verdict).
     again = _diagnose(tmp_path / "screened", target, screen=True)
     assert again["screened"] == report["screened"] and again["named_effect"] == report["named_effect"]
+
+
+def test_the_screen_and_limits_on_workers_are_those_of_one_process(tmp_path: Path, target: Path):
+    """On two workers every clip of the screen's rungs and of the limits' chains is a job of
+    its own (physinfer.discrepancy.clip_jobs): the same screen and limits as in one process."""
+    import json
+
+    one = _diagnose(tmp_path / "one", target, screen=True, limits=True)
+    two = _diagnose(tmp_path / "two", target, screen=True, limits=True, workers=2, registry_factory=_registry)
+    assert two["timing"]["workers"] == 2 and one["timing"]["workers"] == 1
+    screens = [json.loads((tmp_path / run / "screen.json").read_text()) for run in ("one", "two")]
+    assert screens[0] == screens[1] and screens[0]["effects"]["inert"]["screened"]
+    limits = [json.loads((tmp_path / run / "limits.json").read_text())["limits"] for run in ("one", "two")]
+    for record in limits:
+        record.pop("wall_time_s")
+    assert limits[0] == limits[1] and limits[0]["simulations"] > 0
+    assert two["screened"] == one["screened"] and two["named_effect"] == one["named_effect"]
 
 
 def test_a_deterministic_phenomenon_is_never_screened(tmp_path: Path):
