@@ -69,25 +69,22 @@ def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
     from physinfer.evaluation import simulate_many
     from physinfer.threads import refinement_torch_threads, torch_threads
 
-    _, base = worker_pipeline(job.settings)
-    model = _model(job.settings, job.effects)
+    registry, base = worker_pipeline(job.settings)
+    model = _model(registry, base, job.settings, job.effects)
     trajectory, _ = simulate_many(model.simulator, [dict(job.params)], [int(job.seed)])[0]
     if trajectory is None:
         return None, None, None
     with torch_threads(refinement_torch_threads()):
         clip = base.renderer.render(trajectory, job.render_params)
         embedding = np.asarray(base.embedder.embed(clip), dtype=np.float64)
-    seconds = trajectory.vertices.shape[0] / trajectory.fps
-    return embedding, trajectory if job.keep_trajectory else None, seconds
+    return embedding, trajectory if job.keep_trajectory else None, trajectory.duration
 
 
-def _model(settings: DiagnoseSettings, effects: tuple[str, ...]) -> Pipeline:
-    """The baseline with ``effects`` switched in, built once per worker thread."""
+def _model(registry: Any, base: Pipeline, settings: DiagnoseSettings, effects: tuple[str, ...]) -> Pipeline:
+    """``base`` with ``effects`` switched in, built once per worker thread."""
     from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.discrepancy.parallel import worker_pipeline
     from physinfer.session import fixed_by_user
 
-    registry, base = worker_pipeline(settings)
     if not effects:
         return base
     cache: dict[tuple[int, tuple[str, ...]], Pipeline] = _local.__dict__.setdefault("models", {})

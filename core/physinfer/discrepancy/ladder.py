@@ -91,7 +91,7 @@ class Probe:
         self.simulations += len(params)
         trajectories = [t for t, _ in simulate_many(simulator, list(params), [int(s) for s in seeds])]
         if self.clip_seconds is None:
-            self.clip_seconds = next((t.vertices.shape[0] / t.fps for t in trajectories if t is not None), None)
+            self.clip_seconds = next((t.duration for t in trajectories if t is not None), None)
         return trajectories
 
     def embed(

@@ -292,12 +292,12 @@ def render_sheet(
     positions, normals = sheet.buffers(np.asarray(trajectory.vertices))
     frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
     rgba = np.empty((min(trajectory.n_frames, _COMPOSITE_FRAMES), height, width, 4), dtype=np.uint8)
-    for index in range(trajectory.n_frames):
-        context.update_vertices(primitive, positions[index], normals[index])
-        rgba[index % _COMPOSITE_FRAMES] = context.render(scene, rgba=True)
-        if index % _COMPOSITE_FRAMES == _COMPOSITE_FRAMES - 1 or index == trajectory.n_frames - 1:
-            done = slice(index - index % _COMPOSITE_FRAMES, index + 1)
-            frames[done] = composite_over(rgba[: done.stop - done.start], background)
+    for start in range(0, trajectory.n_frames, _COMPOSITE_FRAMES):
+        stop = min(start + _COMPOSITE_FRAMES, trajectory.n_frames)
+        for index in range(start, stop):
+            context.update_vertices(primitive, positions[index], normals[index])
+            rgba[index - start] = context.render(scene, rgba=True)
+        frames[start:stop] = composite_over(rgba[: stop - start], background)
     return Clip(frames, float(trajectory.fps))
 
 
