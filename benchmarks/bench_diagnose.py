@@ -240,6 +240,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             floor_samples=args.floor_samples,
             select_top=args.select_top,
             select_seeds=args.select_seeds,
+            batch_size=args.batch_size,
             calibration_runs=args.calibration_runs,
             calibrate_all=args.calibrate_all if calibrate_all is None else calibrate_all,
             calibration_control=not args.no_calibration_control,
@@ -567,6 +568,8 @@ def main() -> None:
     parser.add_argument("--select-top", type=int, default=0,
                         help="each stage re-simulates its best M trials and keeps the lowest mean (0: off)")
     parser.add_argument("--select-seeds", type=int, default=3)
+    parser.add_argument("--batch-size", type=int, default=1,
+                        help="trials Ax proposes per GP fit in every stage (diagnose --batch-size)")
     parser.add_argument("--calibration-runs", type=int, default=3)
     parser.add_argument("--no-calibration-control", action="store_true",
                         help="self-consistency runs without their own control (the misspecification test then "
