@@ -540,3 +540,19 @@ def test_a_calibration_target_is_encoded_once_and_read_back(tmp_path: Path, monk
     calibration_target(pipeline, {**theta, "length": 1.2}, target, 7, tmp_path / "calibration-0")
     assert len(writes) == 2
     pipeline.renderer.close()
+
+
+def test_a_pool_starts_its_workers_with_their_model_before_the_first_round(tmp_path: Path):
+    """The workers start while the baseline runs: each builds its model and an optimizer (a
+    failure would only show in the first round's timing, so it is checked here)."""
+    from physinfer.discrepancy.parallel import WorkerPool
+    from physinfer.discrepancy.workflow import DiagnoseSettings
+
+    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=2, optimizer="ax")
+    with WorkerPool(settings, ["quadratic_drag"], 3, print) as pool:
+        warming = pool.warm_up()
+        assert len(warming) == 2
+        assert [f.result(timeout=300) for f in warming] == [None, None]
+    alone = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1)
+    with WorkerPool(alone, ["quadratic_drag"], 3, print) as pool:
+        assert pool.warm_up() == [] and pool.size == 1

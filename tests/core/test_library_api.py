@@ -138,8 +138,9 @@ def test_refine_and_diagnose_declare_their_shared_options_alike():
         for kind in (pi.ModelOptions, pi.TargetOptions, pi.SearchOptions)
         for f in dataclasses.fields(kind)
     ]
-    # What these mean differs by command: the effects tried, the video, the budget, the floor.
-    differ = {"effects", "target", "truth", "steps", "floor_samples"}
+    # What these mean differs by command: the effects tried, the video, the budget, the floor,
+    # the batch (diagnose's many refinements propose two trials per GP fit by default).
+    differ = {"effects", "target", "truth", "steps", "floor_samples", "batch_size"}
     for name in set(shared) - differ:
         assert helps["refine"][name] == helps["diagnose"][name], name
 

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from physinfer.cli.app import (
-    BatchSizeOpt,
+    DiagnoseBatchSizeOpt,
     DurationOpt,
     EmbedderFramesOpt,
     FixOpt,
@@ -62,7 +62,7 @@ def diagnose_cmd(
     ] = 6,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
-    batch_size: BatchSizeOpt = 1,
+    batch_size: DiagnoseBatchSizeOpt = 2,
     calibrate: Annotated[
         bool,
         typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),

@@ -85,6 +85,17 @@ BatchSizeOpt = Annotated[
 ]
 
 
+DiagnoseBatchSizeOpt = Annotated[
+    int,
+    typer.Option(
+        "--batch-size",
+        help="Trials proposed per optimizer step of every stage and simulated as one batch (q). "
+        "2 halves the GP fits of a diagnosis' many refinements (Ax's step was most of a pendulum "
+        "trial); 1 proposes one at a time, as refine does.",
+    ),
+]
+
+
 def parse_render_set(items: list[str]) -> dict[str, Any]:
     """``NAME=VALUE`` render settings; numbers become floats, ``true``/``false`` booleans."""
     from physinfer.parameters import parse_assignments

@@ -183,6 +183,13 @@ def worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
     return cache[key]
 
 
+def warm_worker(settings: DiagnoseSettings) -> None:
+    """Build this worker's model and one optimizer (the imports, the embedder's weights), so
+    that its first job does not pay for them; what it builds, :func:`worker_pipeline` keeps."""
+    registry, _ = worker_pipeline(settings)
+    registry.get("optimizers", settings.optimizer).load()(dim=1, seed=0, names=["warm_up"])
+
+
 def _installed(settings: DiagnoseSettings) -> Any:
     """The registry a worker can build: the settings' factory's, or the installed plugins'."""
     if settings.registry_factory is not None:
@@ -261,6 +268,16 @@ class WorkerPool:
                 open_executor(workers=self.size, scheduler=self.settings.scheduler, threads_per_worker=1)
             )
         return self._executor
+
+    def warm_up(self) -> list[Future]:
+        """Start the local workers now, each building its model in the background: the
+        baseline keeps one core busy, and the workers' start (a few seconds of imports and
+        weights each) then costs the first round nothing. A failure here is left for the
+        first real job to meet (and say); the futures are returned for a caller to wait on."""
+        if self.size < 2 or self.settings.scheduler:
+            return []
+        executor = self.executor()
+        return [executor.submit(warm_worker, self.settings) for _ in range(self.size)]
 
     def where(self) -> str:
         if self.settings.scheduler:

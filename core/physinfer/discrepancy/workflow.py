@@ -118,7 +118,8 @@ class DiagnoseSettings:
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
         batch_size: Trials per optimizer step of every stage, simulated as one batch (see
-            :class:`physinfer.loop.RefineConfig`).
+            :class:`physinfer.loop.RefineConfig`); 2 by default: half the GP fits, which were
+            most of a pendulum trial (docs/benchmarks.md, "Two trials per GP fit").
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
             (the maximum by default) makes their gaps one (see :mod:`physinfer.discrepancy.decide`).
@@ -177,7 +178,7 @@ class DiagnoseSettings:
     floor_samples: int = 6
     select_top: int = 0
     select_seeds: int = 3
-    batch_size: int = 1
+    batch_size: int = 2
     calibrate: bool = True
     calibration_runs: int = 3
     calibrate_all: bool = False
@@ -325,7 +326,8 @@ def _diagnose_stages(
     common = {"registry": registry, "settings": settings, "on_trial": bars.update}
     clock = StageClock()
 
-    # 1. The baseline.
+    # 1. The baseline (the workers start meanwhile).
+    pool.warm_up()
     say(f"[1/6] refining the baseline ({steps} trials)")
     with clock.stage("baseline"):
         baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
