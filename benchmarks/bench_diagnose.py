@@ -568,9 +568,9 @@ def main() -> None:
     parser.add_argument("--select-top", type=int, default=0,
                         help="each stage re-simulates its best M trials and keeps the lowest mean (0: off)")
     parser.add_argument("--select-seeds", type=int, default=3)
-    parser.add_argument("--batch-size", type=int, default=2,
+    parser.add_argument("--batch-size", type=int, default=None,
                         help="trials proposed per optimizer step of every stage (diagnose --batch-size; "
-                             "the tables before 2026-11-25 were made with 1)")
+                             "default: the phenomenon's, 2 for the pendulum since 2026-11-25, 1 before)")
     parser.add_argument("--calibration-runs", type=int, default=3)
     parser.add_argument("--no-calibration-control", action="store_true",
                         help="self-consistency runs without their own control (the misspecification test then "

@@ -556,3 +556,16 @@ def test_a_pool_starts_its_workers_with_their_model_before_the_first_round(tmp_p
     alone = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1)
     with WorkerPool(alone, ["quadratic_drag"], 3, print) as pool:
         assert pool.warm_up() == [] and pool.size == 1
+
+
+def test_the_batch_size_is_the_phenomenons_unless_given(tmp_path: Path):
+    """The pendulum proposes two trials per GP fit in diagnose (its trials are mostly Ax's
+    step), unless --batch-size says otherwise; the report records what ran."""
+    target = _pendulum_target(tmp_path, "quadratic_drag")
+    kw = {"steps": 3, "optimizer": "random", "calibrate": False, "limits": False}
+    default = _diagnose(tmp_path / "default", target, **kw)
+    assert default["settings"]["batch_size"] == 2
+    one = _diagnose(tmp_path / "one", target, batch_size=1, **kw)
+    assert one["settings"]["batch_size"] == 1
+    with pytest.raises(UserInputError, match="--batch-size must be at least 1"):
+        _diagnose(tmp_path / "zero", target, batch_size=0, **kw)

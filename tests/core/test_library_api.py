@@ -139,7 +139,7 @@ def test_refine_and_diagnose_declare_their_shared_options_alike():
         for f in dataclasses.fields(kind)
     ]
     # What these mean differs by command: the effects tried, the video, the budget, the floor,
-    # the batch (diagnose's many refinements propose two trials per GP fit by default).
+    # the batch (diagnose's default is the phenomenon's: two trials per GP fit for the pendulum).
     differ = {"effects", "target", "truth", "steps", "floor_samples", "batch_size"}
     for name in set(shared) - differ:
         assert helps["refine"][name] == helps["diagnose"][name], name

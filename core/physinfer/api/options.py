@@ -192,11 +192,12 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         workers: Local worker processes running the stages after the baseline side by side
             (``None``: one per CPU; 0 or 1: in this process).
         scheduler: A Dask scheduler address whose workers run those stages.
-        batch_size: Trials proposed per optimizer step of every stage (2: half the GP fits).
+        batch_size: Trials proposed per optimizer step of every stage (``None``: the
+            phenomenon's ``diagnose_batch_size``: 2 for the pendulum example, 1 for the flag).
     """
 
     out: Path | None = None
-    batch_size: int = 2
+    batch_size: int | None = None
     effect_steps: int | None = None
     floor_samples: int = 6
     calibrate: bool = True

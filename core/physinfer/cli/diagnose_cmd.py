@@ -62,7 +62,7 @@ def diagnose_cmd(
     ] = 6,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
-    batch_size: DiagnoseBatchSizeOpt = 2,
+    batch_size: DiagnoseBatchSizeOpt = None,
     calibrate: Annotated[
         bool,
         typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),

@@ -86,12 +86,13 @@ BatchSizeOpt = Annotated[
 
 
 DiagnoseBatchSizeOpt = Annotated[
-    int,
+    int | None,
     typer.Option(
         "--batch-size",
         help="Trials proposed per optimizer step of every stage and simulated as one batch (q). "
-        "2 halves the GP fits of a diagnosis' many refinements (Ax's step was most of a pendulum "
-        "trial); 1 proposes one at a time, as refine does.",
+        "Default: the phenomenon's (2 for the pendulum example, whose trials are mostly Ax's GP "
+        "fit; 1 for the flag).",
+        show_default=False,
     ),
 ]
 

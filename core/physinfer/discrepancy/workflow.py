@@ -33,6 +33,7 @@ and the pass through the stages below reads them back from disk.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -118,8 +119,8 @@ class DiagnoseSettings:
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
         batch_size: Trials per optimizer step of every stage, simulated as one batch (see
-            :class:`physinfer.loop.RefineConfig`); 2 by default: half the GP fits, which were
-            most of a pendulum trial (docs/benchmarks.md, "Two trials per GP fit").
+            :class:`physinfer.loop.RefineConfig`); ``None``: the phenomenon's
+            ``diagnose_batch_size`` (:class:`physinfer.roles.Phenomenon`).
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
             (the maximum by default) makes their gaps one (see :mod:`physinfer.discrepancy.decide`).
@@ -178,7 +179,7 @@ class DiagnoseSettings:
     floor_samples: int = 6
     select_top: int = 0
     select_seeds: int = 3
-    batch_size: int = 2
+    batch_size: int | None = None
     calibrate: bool = True
     calibration_runs: int = 3
     calibrate_all: bool = False
@@ -206,7 +207,8 @@ class DiagnoseSettings:
             raise UserInputError(
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
             )
-        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=self.batch_size).validate()
+        batch = 1 if self.batch_size is None else self.batch_size  # None: the phenomenon's, checked there
+        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=batch).validate()
         if self.workers is not None and self.workers < 0:
             raise UserInputError(f"--workers must be 0 (in this process) or more, got {self.workers}")
         if self.calibration_runs < 1:
@@ -241,6 +243,13 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     registry = scene_registry(registry, settings)  # every model is built for the scene
     base, target = _load(registry, settings)
     phenomenon = base.phenomenon
+    if settings.batch_size is None:  # resolved once: every stage, here and on workers, alike
+        if (batch := int(phenomenon.diagnose_batch_size)) < 1:
+            raise UserInputError(
+                f"the {phenomenon.name} plugin's diagnose_batch_size must be at least 1, got {batch}: "
+                "pass --batch-size, or fix the plugin"
+            )
+        settings = dataclasses.replace(settings, batch_size=batch)
     effect_names = list(settings.effects) or registry.effects_of(phenomenon.name)
     if not effect_names:
         raise UserInputError(f"no effects are registered for {phenomenon.name!r}: nothing to try")

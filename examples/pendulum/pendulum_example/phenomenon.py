@@ -42,4 +42,7 @@ def make_phenomenon() -> Phenomenon:
         default_target=default_target,
         effects=("quadratic_drag",),
         default_steps=20,
+        # Ax's step is most of a trial here: two per GP fit (docs/benchmarks.md, "Two trials
+        # per GP fit": the pendulum's diagnosis table kept every decision).
+        diagnose_batch_size=2,
     )
