@@ -265,11 +265,6 @@ class Phenomenon:
             search starts from a posterior estimator's median and box (``None``:
             ``default_steps``). Starting where the video points, fewer trials do: on the
             flag, 16 trials from the shipped estimator beat 40 (docs/benchmarks.md).
-        diagnose_batch_size: Trials per optimizer step in each of ``diagnose``'s refinements
-            when ``--batch-size`` is not given. Where a trial costs little beside the
-            optimizer's own step (the pendulum: 0.16 s to simulate, render and embed against
-            0.5 s of Ax's GP fit and acquisition), 2 halves the GP fits; where simulating
-            dominates (the flag), 1 keeps every search step informed by the last trial.
         default_posterior: Path of a shipped posterior estimator (``physinfer posterior
             train``) used by ``infer`` and ``refine`` when none is given; ``None``: none.
         scene_posteriors: Paths of further shipped estimators, trained across ranges of
@@ -286,6 +281,11 @@ class Phenomenon:
             keyword ``scene`` in ``make_simulator`` (and may in ``make_renderer``): the
             complete, validated settings by name, passed only when the user gave some
             (see :mod:`physinfer.scene`). Empty: ``--scene-set`` is refused.
+        diagnose_batch_size: Trials per optimizer step in each of ``diagnose``'s refinements
+            when ``--batch-size`` is not given. Where a trial costs little beside the
+            optimizer's own step (the pendulum: 0.16 s to simulate, render and embed against
+            0.5 s of Ax's GP fit and acquisition), 2 halves the GP fits; where simulating
+            dominates (the flag), 1 keeps every search step informed by the last trial.
     """
 
     name: str
@@ -299,10 +299,11 @@ class Phenomenon:
     effects: tuple[str, ...] = ()
     default_steps: int = 40
     default_steps_with_posterior: int | None = None
-    diagnose_batch_size: int = 1
     default_posterior: str | None = None
     scene_posteriors: tuple[str, ...] = ()
     framing: (
         Callable[[tuple[float, float, float, float]], tuple[float, float, float, float]] | None
     ) = None
     scene_settings: tuple[SceneSetting, ...] = ()
+    # Last, so that records built with positional arguments keep their meaning.
+    diagnose_batch_size: int = 1
