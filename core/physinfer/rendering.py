@@ -168,9 +168,10 @@ def _read_colour_only(renderer: Any) -> None:
 
     pyrender resolves and reads the depth buffer of every frame too, and converts it to
     metres: about 8 % of a 112-px flag clip's render time on llvmpipe (0.78 → 0.71 s for
-    200 frames, one measurement), for a buffer nothing here uses. The colour is resolved and read exactly as pyrender does (the same calls, so the
-    same pixels); the depth returned is ``None``. Offscreen rendering on Linux only (macOS
-    rescales its buffers: pyrender's own reader is kept there).
+    200 frames, one measurement), for a buffer nothing here uses. The colour is resolved
+    and read exactly as pyrender does (the same calls, so the same pixels); the depth
+    returned is ``None``. Offscreen rendering on Linux only (macOS rescales its buffers:
+    pyrender's own reader is kept there).
     """
     import sys
 

@@ -303,10 +303,10 @@ def write_video(
 
     ``lossless``: H.264 in RGB without loss (``libx264rgb``, quantiser 0; a 200-frame 112-px
     flag clip takes 1.5 MB against 71 kB): reading it back gives these frames exactly. The
-    lossy encoding is not repeatable here —
-    the same frames, written in another process, decoded to other pixels now and then (libx264
-    through PyAV on the 2-core machine, with one encoder thread too) — so a video that is to
-    be the same target every time it is made (a benchmark's) is written lossless.
+    lossy encoding is not repeatable here — the same frames, written in another process,
+    decoded to other pixels now and then (libx264 through PyAV on the 2-core machine, with
+    one encoder thread too) — so a video that is to be the same target every time it is made
+    (a benchmark's) is written lossless.
     """
     if isinstance(frames, Clip):
         frames, fps = frames.frames, frames.fps if fps is None else fps
