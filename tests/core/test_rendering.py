@@ -133,3 +133,99 @@ def test_custom_mesh_shaders_are_used(tmp_path: Path) -> None:
     finally:
         context.close()
     np.testing.assert_array_equal(image[16, 16], [0, 255, 0])
+
+
+def two_mesh_scene() -> tuple[object, object, object, object]:
+    """Two triangles of different colours that cross as they move, a light and a camera:
+    (scene, the moving node, the deforming primitive, the camera node)."""
+    import pyrender
+
+    scene, primitive = triangle_scene()
+    red = pyrender.MetallicRoughnessMaterial(baseColorFactor=[0.9, 0.1, 0.1, 1.0], roughnessFactor=0.4)
+    positions = np.array([[-0.4, -0.3, 0.1], [0.4, -0.3, 0.1], [0.0, 0.4, 0.1]], np.float32)
+    other = pyrender.Primitive(positions=positions, normals=np.tile([[0.0, 0.0, 1.0]], (3, 1)).astype(np.float32),
+                               indices=np.array([[0, 1, 2]]), material=red)
+    moving = scene.add(pyrender.Mesh([other]))
+    scene.add(pyrender.DirectionalLight(intensity=2.0), pose=look_at(np.array([1.0, 1.0, 2.0]), np.zeros(3)))
+    return scene, moving, primitive, scene.main_camera_node
+
+
+def animation(frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses of the moving node (it passes behind and in front of the other triangle, so the
+    draw order changes) and vertices of the deforming triangle, ``frames`` long."""
+    t = np.linspace(0.0, 1.0, frames)
+    poses = np.tile(np.eye(4), (frames, 1, 1))
+    poses[:, 0, 3], poses[:, 2, 3] = 0.6 * np.sin(6 * t), 0.3 * np.cos(5 * t)
+    base = np.array([[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.0, 0.5, 0.0]], np.float32)
+    positions = base[None] + (0.2 * np.sin(np.outer(t, [3.0, 4.0, 5.0]))[..., None] * [1.0, 0.5, 0.0]).astype(np.float32)
+    normals = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (frames, 3, 1))
+    return poses, positions, normals
+
+
+@pytest.mark.parametrize("rgba", [False, True])
+def test_a_sequence_gives_pyrenders_own_pixels_frame_by_frame(rgba: bool) -> None:
+    """render_sequence (frames replayed, uniforms not re-uploaded) against a plain
+    ``pyrender.OffscreenRenderer`` rendering each frame from scratch: bit for bit."""
+    import pyrender
+
+    frames = 12
+    poses, positions, normals = animation(frames)
+    scene, moving, primitive, _ = two_mesh_scene()
+    context = OffscreenContext(40, 32)
+    try:
+        ours = context.render_sequence(scene, poses={moving: poses}, vertices={primitive: (positions, normals)},
+                                       rgba=rgba)
+    finally:
+        context.close()
+    reference_scene, reference_moving, reference_primitive, _ = two_mesh_scene()
+    renderer = pyrender.OffscreenRenderer(40, 32)
+    try:
+        theirs = []
+        for i in range(frames):
+            reference_scene.set_pose(reference_moving, poses[i])
+            reference_scene.remove_node(next(iter(reference_scene.get_nodes(obj=next(
+                m for m in reference_scene.meshes if reference_primitive in m.primitives)))))
+            reference_primitive = pyrender.Primitive(
+                positions=positions[i], normals=normals[i], indices=np.array([[0, 1, 2]]),
+                material=reference_primitive.material)
+            reference_scene.add(pyrender.Mesh([reference_primitive]))
+            flags = pyrender.RenderFlags.RGBA if rgba else pyrender.RenderFlags.NONE
+            theirs.append(renderer.render(reference_scene, flags=flags)[0])
+    finally:
+        renderer.delete()
+    assert ours.shape == (frames, 32, 40, 4 if rgba else 3)
+    assert len({frame.tobytes() for frame in ours}) == frames, "every frame differs"
+    np.testing.assert_array_equal(ours, np.stack(theirs)[..., : ours.shape[-1]])
+
+
+def test_a_moved_camera_is_seen_although_uniforms_are_remembered() -> None:
+    """The programs skip re-uploading a uniform they hold; a changed one (the camera's
+    matrices) is uploaded: the moved view equals a fresh context's."""
+    scene, _, _, camera = two_mesh_scene()
+    fresh_scene, _, _, fresh_camera = two_mesh_scene()
+    moved = look_at(np.array([0.4, 0.2, 2.0]), np.zeros(3), up=np.array([0.0, 1.0, 0.0]))
+    context, fresh = OffscreenContext(32, 32), OffscreenContext(32, 32)
+    try:
+        before = context.render(scene)
+        scene.set_pose(camera, moved)
+        after = context.render(scene)
+        fresh_scene.set_pose(fresh_camera, moved)
+        expected = fresh.render(fresh_scene)
+    finally:
+        context.close()
+        fresh.close()
+    assert np.abs(before.astype(int) - after).max() > 50
+    np.testing.assert_array_equal(after, expected)
+
+
+def test_a_sequence_needs_one_frame_count() -> None:
+    scene, moving, primitive, _ = two_mesh_scene()
+    poses, positions, normals = animation(4)
+    context = OffscreenContext(16, 16)
+    try:
+        with pytest.raises(ValueError, match=r"one frame count >= 1.*\[3, 4\]"):
+            context.render_sequence(scene, poses={moving: poses}, vertices={primitive: (positions[:3], normals[:3])})
+        with pytest.raises(ValueError, match="one frame count"):
+            context.render_sequence(scene)
+    finally:
+        context.close()

@@ -88,14 +88,11 @@ class PendulumRenderer(Renderer):
         scene.add(pyrender.PerspectiveCamera(yfov=np.radians(float(zeta["yfov_deg"]))), pose=pose)
         scene.add(pyrender.DirectionalLight(intensity=float(zeta["light"])), pose=pose)
 
-        frames = np.empty((trajectory.n_frames, size, size, 3), dtype=np.uint8)
-        for i, verts in enumerate(trajectory.vertices):
-            centre = verts.mean(axis=0)
-            bob_pose = np.eye(4)
-            bob_pose[:3, 3] = centre - rest
-            scene.set_pose(bob_node, bob_pose)
-            scene.set_pose(rod_node, _rod_pose(pivot, centre))
-            frames[i] = ctx.render(scene)
+        centres = trajectory.vertices.mean(axis=1)
+        bob_poses = np.tile(np.eye(4), (trajectory.n_frames, 1, 1))
+        bob_poses[:, :3, 3] = centres - rest
+        rod_poses = np.stack([_rod_pose(pivot, centre) for centre in centres])
+        frames = ctx.render_sequence(scene, poses={bob_node: bob_poses, rod_node: rod_poses})
         return Clip(frames, trajectory.fps)
 
     def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:

@@ -261,7 +261,7 @@ def context_of_size(
     return OffscreenContext(width, height, mesh_shaders=mesh_shaders)
 
 
-#: Frames composited at once (bounds the buffer of renders awaiting their background).
+#: Frames drawn and composited at once (bounds the buffer of renders awaiting their background).
 _COMPOSITE_FRAMES = 32
 
 
@@ -287,17 +287,15 @@ def render_sheet(
         Clip of ``(T, H, W, 3)`` uint8 frames at ``trajectory.fps``.
     """
     height, width = background.shape[:2]
-    # Every frame's buffers at once and the compositing by blocks of frames: only the upload
-    # and the draw itself are left per frame (the same pixels as frame by frame).
+    # Every frame's buffers at once, the frames drawn by blocks (pyrender's per-frame work
+    # done once a block, the same pixels: OffscreenContext.render_sequence) and composited
+    # by blocks, which bounds the renders awaiting their background.
     positions, normals = sheet.buffers(np.asarray(trajectory.vertices))
     frames = np.empty((trajectory.n_frames, height, width, 3), dtype=np.uint8)
-    rgba = np.empty((min(trajectory.n_frames, _COMPOSITE_FRAMES), height, width, 4), dtype=np.uint8)
     for start in range(0, trajectory.n_frames, _COMPOSITE_FRAMES):
-        stop = min(start + _COMPOSITE_FRAMES, trajectory.n_frames)
-        for index in range(start, stop):
-            context.update_vertices(primitive, positions[index], normals[index])
-            rgba[index - start] = context.render(scene, rgba=True)
-        frames[start:stop] = composite_over(rgba[: stop - start], background)
+        block = slice(start, min(start + _COMPOSITE_FRAMES, trajectory.n_frames))
+        rgba = context.render_sequence(scene, vertices={primitive: (positions[block], normals[block])}, rgba=True)
+        frames[block] = composite_over(rgba, background)
     return Clip(frames, float(trajectory.fps))
 
 
