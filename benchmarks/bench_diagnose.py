@@ -455,6 +455,19 @@ def power_cases(args: argparse.Namespace, effects: list[str]) -> list[tuple[str 
     return rows
 
 
+def shard_of_power_cases(
+    cases: list[tuple[str | None, float, int, str]], shard: int, n_shards: int
+) -> set[tuple[str | None, float, int]]:
+    """The diagnoses shard ``shard`` of ``n_shards`` runs: every ``n_shards``-th distinct one.
+
+    By distinct diagnosis, not by seed: a seed's clean target serves every effect's curve
+    and is diagnosed once, by one shard; and the shards get equal shares (five seeds split
+    by seed over two processes gave one of them three).
+    """
+    distinct = list(dict.fromkeys((hidden, strength, seed) for hidden, strength, seed, _ in cases))
+    return {case for i, case in enumerate(distinct) if i % n_shards == shard}
+
+
 def _crossing(xs: list[float], ys: list[float], level: float) -> float | None:
     """Where the piecewise-linear curve ``ys(xs)`` first reaches ``level``."""
     for (x0, y0), (x1, y1) in zip(zip(xs, ys, strict=True), list(zip(xs, ys, strict=True))[1:], strict=False):
@@ -575,7 +588,8 @@ def main() -> None:
     parser.add_argument("--no-calibration-control", action="store_true",
                         help="self-consistency runs without their own control (the misspecification test then "
                              "uses the baseline stage's gap)")
-    parser.add_argument("--shard", default=None, help="K/N: run the seeds whose index is K modulo N")
+    parser.add_argument("--shard", default=None, help="K/N: run the seeds whose index is K modulo N "
+                        "(with --power: every N-th distinct diagnosis, from the K-th)")
     parser.add_argument("--merge", action="store_true", help="summarise the cases' rows under --out; run nothing")
     parser.add_argument("--compare-calibration", action="store_true",
                         help="with --merge: each case's decisions under earlier calibrations and rules (from its stored gaps)")
@@ -678,9 +692,11 @@ def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> No
     start = time.perf_counter()
     rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
     shard, n_shards = parse_shard(args.shard)
-    for hidden, strength, seed, effect in power_cases(args, effects):
+    cases = power_cases(args, effects)
+    mine = shard_of_power_cases(cases, shard, n_shards)
+    for hidden, strength, seed, effect in cases:
         row_file = case_dir_of(args.plugin, hidden, seed, args.out, strength) / "case.json"
-        if args.merge or (seed - args.first_seed) % n_shards != shard:
+        if args.merge or (hidden, strength, seed) not in mine:
             if row_file.is_file():
                 rows[effect].append(json.loads(row_file.read_text()))
             elif args.merge:

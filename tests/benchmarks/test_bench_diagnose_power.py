@@ -1,0 +1,22 @@
+"""The power table of ``benchmarks/bench_diagnose.py --power`` splits over processes so that
+every diagnosis runs once (a seed's clean target serves every effect's curve) and the shares
+are equal."""
+
+import argparse
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path.insert(0, str(BENCH))
+import bench_diagnose as bd  # noqa: E402
+
+
+def test_power_shards_run_each_diagnosis_once_in_equal_shares() -> None:
+    args = argparse.Namespace(first_seed=100, seeds=5, strengths=[0.0, 0.5, 1.0])
+    cases = bd.power_cases(args, ["wind_yaw", "wind_inclination", "wind_shear", "wind_gusts"])
+    distinct = {(hidden, strength, seed) for hidden, strength, seed, _ in cases}
+    assert len(cases) == 5 * 4 * 3 and len(distinct) == 5 * (1 + 4 * 2)  # clean once per seed
+    shards = [bd.shard_of_power_cases(cases, k, 2) for k in range(2)]
+    assert shards[0].isdisjoint(shards[1]) and shards[0] | shards[1] == distinct
+    assert sorted(len(s) for s in shards) == [22, 23]
+    assert bd.shard_of_power_cases(cases, 0, 1) == distinct
