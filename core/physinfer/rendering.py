@@ -150,9 +150,11 @@ class OffscreenContext:
             in the last frame.
 
         Raises:
-            ValueError: no frames, or arguments of different frame counts.
+            ValueError: no frames, arguments of different frame counts, or a node or
+                primitive that is not in ``scene``.
         """
         poses, vertices = dict(poses or {}), dict(vertices or {})
+        _check_in_scene(scene, poses, vertices)
         counts = {len(p) for p in poses.values()} | {len(v[0]) for v in vertices.values()}
         counts |= {len(v[1]) for v in vertices.values() if v[1] is not None}
         if len(counts) != 1 or 0 in counts:
@@ -267,6 +269,14 @@ def _release_egl_context_only(renderer: Any) -> None:
     platform._egl_display = None
     renderer._renderer = None
     renderer._platform = None
+
+
+def _check_in_scene(scene: Any, nodes: Mapping[Any, Any], primitives: Mapping[Any, Any]) -> None:
+    """Refuse an animated node or primitive that ``scene`` does not hold (it would not be
+    drawn, or its vertex buffer would not exist)."""
+    held = {id(p) for mesh in scene.meshes for p in mesh.primitives}
+    if any(node not in scene.nodes for node in nodes) or any(id(p) not in held for p in primitives):
+        raise ValueError("render_sequence: every animated node and primitive must be in the scene rendered")
 
 
 def _upload_vertices(primitive: Any) -> None:

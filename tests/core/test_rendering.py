@@ -218,7 +218,7 @@ def test_a_moved_camera_is_seen_although_uniforms_are_remembered() -> None:
     np.testing.assert_array_equal(after, expected)
 
 
-def test_a_sequence_needs_one_frame_count() -> None:
+def test_a_sequence_needs_one_frame_count_and_its_own_scene() -> None:
     scene, moving, primitive, _ = two_mesh_scene()
     poses, positions, normals = animation(4)
     context = OffscreenContext(16, 16)
@@ -227,5 +227,8 @@ def test_a_sequence_needs_one_frame_count() -> None:
             context.render_sequence(scene, poses={moving: poses}, vertices={primitive: (positions[:3], normals[:3])})
         with pytest.raises(ValueError, match="one frame count"):
             context.render_sequence(scene)
+        _, other_primitive = triangle_scene()
+        with pytest.raises(ValueError, match="must be in the scene"):
+            context.render_sequence(scene, vertices={other_primitive: (positions, normals)})
     finally:
         context.close()
