@@ -272,7 +272,7 @@ def center_crop_resize(frames: np.ndarray, size: int | tuple[int, int]) -> np.nd
         mode = "F" if fr.dtype == np.float32 and fr.ndim == 2 else None
         im = Image.fromarray(fr, mode=mode) if mode else Image.fromarray(fr)
         resized.append(np.asarray(im.resize((out_w, out_h), Image.Resampling.BILINEAR, reducing_gap=2.0)))
-    return np.stack(resized).astype(frames.dtype)
+    return np.stack(resized).astype(frames.dtype, copy=False)  # float frames come back float32: no copy
 
 
 def prepare_for_embedding(clip: Clip, *, fps: float, n_frames: int, size: int) -> np.ndarray:
