@@ -150,8 +150,9 @@ class OffscreenContext:
             in the last frame.
 
         Raises:
-            ValueError: no frames, arguments of different frame counts, or a node or
-                primitive that is not in ``scene``.
+            ValueError: no frames, arguments of different frame counts, a node or
+                primitive that is not in ``scene``, or a moved node that is or carries the
+                camera or a light.
         """
         poses, vertices = dict(poses or {}), dict(vertices or {})
         _check_in_scene(scene, poses, vertices)
@@ -273,10 +274,20 @@ def _release_egl_context_only(renderer: Any) -> None:
 
 def _check_in_scene(scene: Any, nodes: Mapping[Any, Any], primitives: Mapping[Any, Any]) -> None:
     """Refuse an animated node or primitive that ``scene`` does not hold (it would not be
-    drawn, or its vertex buffer would not exist)."""
+    drawn, or its vertex buffer would not exist), and a moved node that carries the camera or
+    a light (the replayed frames keep the first frame's view and lighting)."""
+    import networkx as nx
+
     held = {id(p) for mesh in scene.meshes for p in mesh.primitives}
     if any(node not in scene.nodes for node in nodes) or any(id(p) not in held for p in primitives):
         raise ValueError("render_sequence: every animated node and primitive must be in the scene rendered")
+    view = set(scene.camera_nodes) | set(scene.light_nodes)
+    # Scene-graph edges run from child to parent: what a node carries are its ancestors here.
+    if any(node in view or view & nx.ancestors(scene._digraph, node) for node in nodes):
+        raise ValueError(
+            "render_sequence moves mesh nodes only: the camera and the lights stay where they are in the "
+            "first frame (render a moving view frame by frame with render)"
+        )
 
 
 def _upload_vertices(primitive: Any) -> None:

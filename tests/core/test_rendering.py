@@ -219,7 +219,7 @@ def test_a_moved_camera_is_seen_although_uniforms_are_remembered() -> None:
 
 
 def test_a_sequence_needs_one_frame_count_and_its_own_scene() -> None:
-    scene, moving, primitive, _ = two_mesh_scene()
+    scene, moving, primitive, camera = two_mesh_scene()
     poses, positions, normals = animation(4)
     context = OffscreenContext(16, 16)
     try:
@@ -230,5 +230,13 @@ def test_a_sequence_needs_one_frame_count_and_its_own_scene() -> None:
         _, other_primitive = triangle_scene()
         with pytest.raises(ValueError, match="must be in the scene"):
             context.render_sequence(scene, vertices={other_primitive: (positions, normals)})
+        with pytest.raises(ValueError, match="mesh nodes only"):
+            context.render_sequence(scene, poses={camera: poses})
+        import pyrender
+
+        carrier = scene.add(pyrender.Mesh([pyrender.Primitive(positions=positions[0], indices=np.array([[0, 1, 2]]))]))
+        scene.add(pyrender.PointLight(intensity=1.0), parent_node=carrier)
+        with pytest.raises(ValueError, match="mesh nodes only"):
+            context.render_sequence(scene, poses={carrier: poses})
     finally:
         context.close()
