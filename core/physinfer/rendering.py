@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.render_replay import program_cache
+from physinfer.render_replay import program_cache, replay_frames
 
 
 def use_headless_gl() -> None:
@@ -177,8 +177,6 @@ class OffscreenContext:
         set_frame(0, current=False)
         out[0] = self.render(scene, rgba=rgba)
         if len(out) > 1:
-            from physinfer.render_replay import replay_frames
-
             replay_frames(self._renderer, scene, out, set_frame, rgba=rgba)
         return out
 
