@@ -9,7 +9,7 @@ failed trial (an error string), never an exception: it is a property of θ, not 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -76,6 +76,12 @@ def simulate_many(
     except Exception:
         return [simulate_one(simulator, p, s) for p, s in zip(params, seeds, strict=True)]
     return [(t, None) if t.is_finite() else (None, NON_FINITE) for t in trajectories]
+
+
+#: Simulates, renders and embeds clips elsewhere (a diagnosis's idle workers): ``(θ list,
+#: seeds)`` → one embedding per pair, ``None`` for a failed simulation, each what
+#: :func:`simulate_and_embed` gives here (the same simulator, ζ and embedder).
+ClipEmbedder = Callable[[Sequence[Mapping[str, float]], Sequence[int]], "list[np.ndarray | None]"]
 
 
 def simulate_and_embed(

@@ -30,6 +30,7 @@ from physinfer.errors import UserInputError
 from physinfer.evaluation import (  # noqa: F401 - re-exported: the loop's evaluation API
     NON_FINITE,
     NON_FINITE_DISTANCE,
+    ClipEmbedder,
     Pipeline,
     evaluate,
     evaluate_batch,
@@ -221,6 +222,7 @@ def run_refinement(
     run_info: dict[str, Any],
     resume: bool = False,
     on_trial: Callable[[TrialRecord, float], None] | None = None,
+    embed_clips: ClipEmbedder | None = None,
 ) -> RefineResult:
     """Run (or continue) a refinement and log every trial to ``run_dir``.
 
@@ -233,6 +235,8 @@ def run_refinement(
         run_info: What is stored in ``run.json`` (checked on resume).
         resume: Continue the trials already logged.
         on_trial: Called after each trial with the record and the best distance so far.
+        embed_clips: Where the selection's re-simulations run (``None``: here), e.g. a
+            diagnosis's workers, idle while its baseline refines; the same numbers.
 
     Returns:
         The :class:`RefineResult` (also written by :func:`physinfer.report.write_report`).
@@ -241,7 +245,9 @@ def run_refinement(
 
     config.validate()
     with torch_threads(refinement_torch_threads()):
-        return _run_refinement(pipeline, target, optimizer_factory, run_dir, config, run_info, resume, on_trial)
+        return _run_refinement(
+            pipeline, target, optimizer_factory, run_dir, config, run_info, resume, on_trial, embed_clips
+        )
 
 
 def _run_refinement(
@@ -253,6 +259,7 @@ def _run_refinement(
     run_info: dict[str, Any],
     resume: bool,
     on_trial: Callable[[TrialRecord, float], None] | None,
+    embed_clips: ClipEmbedder | None = None,
 ) -> RefineResult:
     """The body of :func:`run_refinement` (torch threads already limited)."""
     start = time.perf_counter()
@@ -304,7 +311,7 @@ def _run_refinement(
                 on_trial(record, best)
     selection = None
     if config.select_top:
-        selection = select_best(records, pipeline, target, target_embedding, run_dir, config)
+        selection = select_best(records, pipeline, target, target_embedding, run_dir, config, embed_clips)
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem

@@ -23,7 +23,7 @@ import numpy as np
 from physinfer.errors import SimulationFailed
 
 if TYPE_CHECKING:
-    from physinfer.evaluation import Pipeline
+    from physinfer.evaluation import ClipEmbedder, Pipeline
 
 
 #: Salt of :func:`noise_seeds` unless another is given.
@@ -112,6 +112,21 @@ class NoiseFloor:
         }
 
 
+def _embed_here(
+    pipeline: Pipeline, params: Mapping[str, float], zetas: Sequence[Mapping[str, Any]], seeds: Sequence[int]
+) -> list[np.ndarray | None]:
+    """Every seed's clip made in this process (``None``: its simulation failed)."""
+    from physinfer.evaluation import simulate_many
+
+    # One batch call (the flag simulates it in parallel threads); each clip is embedded on
+    # its own, so the floor is bit for bit what one-at-a-time evaluation measures.
+    simulated = simulate_many(pipeline.simulator, [params] * len(seeds), [int(s) for s in seeds])
+    return [
+        None if trajectory is None else np.asarray(pipeline.embedder.embed(pipeline.renderer.render(trajectory, zeta)))
+        for zeta, (trajectory, _) in zip(zetas, simulated, strict=True)
+    ]
+
+
 def measure_noise_floor(
     pipeline: Pipeline,
     params: Mapping[str, float],
@@ -119,6 +134,7 @@ def measure_noise_floor(
     *,
     seeds: Sequence[int],
     target_embedding: np.ndarray | None = None,
+    embed_clips: ClipEmbedder | None = None,
 ) -> NoiseFloor:
     """Re-simulate ``params`` under each seed, render, embed, and measure the distances.
 
@@ -128,6 +144,7 @@ def measure_noise_floor(
         render_params: ζ for every re-render, or one ζ per seed (render variation).
         seeds: Simulation seeds (at least two; see :func:`noise_seeds`).
         target_embedding: ``(D,)`` embedding of the target, to also measure the gap.
+        embed_clips: Make the clips there, all at once (one ζ only; the same numbers).
 
     Returns:
         The :class:`NoiseFloor`; failed re-simulations are counted, not raised.
@@ -136,23 +153,24 @@ def measure_noise_floor(
         ValueError: for fewer than two seeds or a ζ list of the wrong length.
         SimulationFailed: when fewer than two re-simulations succeed.
     """
-    from physinfer.evaluation import simulate_many, squared_distance
+    from physinfer.evaluation import squared_distance
 
     if len(seeds) < 2:
         raise ValueError(f"a noise floor needs at least two seeds, got {len(seeds)}")
     zetas = [render_params] * len(seeds) if isinstance(render_params, Mapping) else list(render_params)
     if len(zetas) != len(seeds):
         raise ValueError(f"{len(zetas)} render-parameter sets for {len(seeds)} seeds")
-    # One batch call (the flag simulates it in parallel threads); each clip is embedded on
-    # its own, so the floor is bit for bit what one-at-a-time evaluation measures.
-    simulated = simulate_many(pipeline.simulator, [params] * len(seeds), [int(s) for s in seeds])
+    made = (
+        embed_clips([params] * len(seeds), [int(s) for s in seeds])
+        if embed_clips is not None and isinstance(render_params, Mapping)
+        else _embed_here(pipeline, params, zetas, seeds)
+    )
     embeddings, used, failed = [], [], 0
-    for seed, zeta, (trajectory, _) in zip(seeds, zetas, simulated, strict=True):
-        if trajectory is None:  # a failed re-simulation is a property of θ and this seed
+    for seed, embedding in zip(seeds, made, strict=True):
+        if embedding is None:  # a failed re-simulation is a property of θ and this seed
             failed += 1
             continue
-        clip = pipeline.renderer.render(trajectory, zeta)
-        embeddings.append(np.asarray(pipeline.embedder.embed(clip)))
+        embeddings.append(embedding)
         used.append(int(seed))
     if len(embeddings) < 2:
         raise SimulationFailed(f"only {len(embeddings)} of {len(seeds)} re-simulations succeeded")

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from physinfer.errors import SimulationFailed
-from physinfer.evaluation import Pipeline, evaluate
+from physinfer.evaluation import ClipEmbedder, Pipeline, evaluate, squared_distance
 from physinfer.io import atomic_write_json
 from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
@@ -85,6 +85,7 @@ def select_best(
     target_embedding: np.ndarray,
     run_dir: RunDirectory,
     config: RefineConfig,
+    embed_clips: ClipEmbedder | None = None,
 ) -> dict[str, Any] | None:
     """Choose the best θ among the ``select_top`` best trials by re-simulating them.
 
@@ -95,7 +96,8 @@ def select_best(
     fresh seeds (the same for all, none used by a trial or by the noise floor), and the
     lowest *mean fresh distance* wins — an unbiased comparison, since the logged distance
     that made a trial a finalist is not part of its score. Stored in ``selection.json``
-    (a resumed run with the same finalists does not re-simulate).
+    (a resumed run with the same finalists does not re-simulate). ``embed_clips``: make
+    the re-simulations there, all at once (the same numbers: each clip is seeded by itself).
 
     Returns:
         ``{"seeds", "finalists": [{"step", "distance", "resimulated", "score"}],
@@ -123,12 +125,10 @@ def select_best(
         if stored.get("key") == key:
             return stored
     t0 = time.perf_counter()
+    fresh_by_step = _fresh_distances(finalists, seeds, pipeline, target, target_embedding, embed_clips)
     rows = []
     for record in finalists:
-        fresh = [
-            evaluate(pipeline, record.params, target_embedding, target.render_params, s)[0]
-            for s in seeds
-        ]
+        fresh = fresh_by_step[record.step]
         ok = all(d is not None for d in fresh)  # a θ that fails under a fresh seed is no winner
         rows.append(
             {
@@ -151,6 +151,27 @@ def select_best(
     }
     atomic_write_json(path, selection)
     return selection
+
+
+def _fresh_distances(
+    finalists: Sequence[TrialRecord],
+    seeds: Sequence[int],
+    pipeline: Pipeline,
+    target: Target,
+    target_embedding: np.ndarray,
+    embed_clips: ClipEmbedder | None,
+) -> dict[int, list[float | None]]:
+    """Each finalist's distance to the target under each seed (``None``: the simulation or
+    its distance failed), by step: here one by one, or all through ``embed_clips``."""
+    if embed_clips is None:
+        return {
+            r.step: [evaluate(pipeline, r.params, target_embedding, target.render_params, s)[0] for s in seeds]
+            for r in finalists
+        }
+    embeddings = embed_clips([r.params for r in finalists for _ in seeds], [s for _ in finalists for s in seeds])
+    distances = [None if e is None else squared_distance(e, target_embedding) for e in embeddings]
+    finite = [d if d is not None and np.isfinite(d) else None for d in distances]
+    return {r.step: finite[i * len(seeds) : (i + 1) * len(seeds)] for i, r in enumerate(finalists)}
 
 
 def final_noise_floor(

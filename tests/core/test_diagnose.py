@@ -332,7 +332,7 @@ def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
 def test_stages_on_workers_give_the_trials_and_decisions_of_one_process(tmp_path: Path):
     target = _pendulum_target(tmp_path, "quadratic_drag")
     # (Ax's trials were checked the same way by hand: a default pendulum diagnosis, 9 stages.)
-    kw = {"steps": 3, "optimizer": "random", "calibration_runs": 2}
+    kw = {"steps": 3, "optimizer": "random", "calibration_runs": 2, "select_top": 2, "select_seeds": 2}
     alone = _diagnose(tmp_path / "alone", target, workers=1, **kw)
     side_by_side = _diagnose(tmp_path / "workers", target, workers=2, **kw)
     assert side_by_side["timing"]["workers"] == 2 and alone["timing"]["workers"] == 1
@@ -347,6 +347,12 @@ def test_stages_on_workers_give_the_trials_and_decisions_of_one_process(tmp_path
         assert [(t.params, t.distance) for t in one] == [(t.params, t.distance) for t in two], stage
     for key in ("misspecified", "named_effect", "gap_before", "gap_after", "null_scale", "self_consistency_gaps"):
         assert side_by_side[key] == alone[key], key
+    # The baseline's selection and gap, re-simulated on the workers there, equal this process' own.
+    one, two = (tmp_path / run / "diag-quadratic_drag" / "baseline" for run in ("alone", "workers"))
+    assert json.loads((one / "selection.json").read_text())["finalists"] == json.loads(
+        (two / "selection.json").read_text())["finalists"]  # fmt: skip
+    here, there = (np.load(d / "gap.npz", allow_pickle=False)["embeddings"] for d in (one, two))
+    assert here.dtype == there.dtype and np.array_equal(here, there)
     # The detection-limit ladders ran on the workers too (one job per effect), to the same limits.
     assert "limits" in side_by_side["timing"]["stages_s"]
     for key in ("detectable_from", "limit"):
@@ -556,6 +562,36 @@ def test_a_pool_starts_its_workers_with_their_model_before_the_first_round(tmp_p
     alone = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1)
     with WorkerPool(alone, ["quadratic_drag"], 3, print) as pool:
         assert pool.warm_up() == [] and pool.size == 1
+
+
+def test_the_baselines_resimulations_on_workers_are_this_process_own(tmp_path: Path):
+    """The pooled clip embedder (the baseline's selection and gap) gives each clip's
+    embedding as simulate_and_embed does here, failed simulations as None; with one worker
+    there is none."""
+    from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
+    from physinfer.discrepancy.parallel import WorkerPool
+    from physinfer.discrepancy.stages import build_base
+    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.evaluation import simulate_and_embed
+    from physinfer.plugins import load_registry
+
+    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=2, optimizer="random")
+    base = build_base(load_registry()[0], settings)
+    zeta = {**base.renderer.default_render_params, "size": 32}
+    theta = base.simulator.parameter_space.from_unit(np.zeros(len(base.simulator.parameter_space)))
+    blown_up = {**theta, "length": float("nan")}
+    said: list[str] = []
+    with WorkerPool(settings, [], 3, said.append) as pool:
+        embed = pooled_clip_embedder(pool, base, zeta, said.append)
+        assert embed is not None
+        there = embed([theta, theta, blown_up], [3, 4, 5])
+    here = [simulate_and_embed(base, p, zeta, s)[0] for p, s in [(theta, 3), (theta, 4), (blown_up, 5)]]
+    assert there[2] is None and here[2] is None and not said
+    for a, b in zip(there[:2], here[:2], strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    with WorkerPool(DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1), [], 3, print) as pool:
+        assert pooled_clip_embedder(pool, base, zeta, print) is None
+    base.renderer.close()
 
 
 def test_the_batch_size_is_the_phenomenons_unless_given(tmp_path: Path):

@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from physinfer.discrepancy.limits import ProbeFactory
     from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.evaluation import ClipEmbedder
     from physinfer.loop import Pipeline
 
 Log = Callable[[str], None]
@@ -52,6 +53,7 @@ class ClipJob:
         params: θ, with the effects' parameters.
         seed: The simulation seed.
         keep_trajectory: Send the trajectory back too (another view's what-if re-renders it).
+        as_embedded: Send the embedding back as the embedder gave it (else as float64).
     """
 
     settings: DiagnoseSettings
@@ -60,6 +62,7 @@ class ClipJob:
     params: Mapping[str, float]
     seed: int
     keep_trajectory: bool = False
+    as_embedded: bool = False
 
 
 def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
@@ -76,7 +79,7 @@ def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
         return None, None, None
     with torch_threads(refinement_torch_threads()):
         clip = base.renderer.render(trajectory, job.render_params)
-        embedding = np.asarray(base.embedder.embed(clip), dtype=np.float64)
+        embedding = np.asarray(base.embedder.embed(clip), dtype=None if job.as_embedded else np.float64)
     return embedding, trajectory if job.keep_trajectory else None, trajectory.duration
 
 
@@ -147,6 +150,34 @@ def pooled_probes(pool: WorkerPool | None, base: Pipeline, render_params: Mappin
         return None
     executor, settings = pool.executor(), pool.settings
     return lambda keep: PooledProbe(base, render_params, executor, settings, keep_trajectories=keep)
+
+
+def pooled_clip_embedder(
+    pool: WorkerPool | None, base: Pipeline, render_params: Mapping[str, Any], say: Log
+) -> ClipEmbedder | None:
+    """The baseline model's clips at ζ made on the pool's workers, one job per clip (``None``:
+    it has one worker or fewer): the baseline's selection and gap, which would otherwise
+    run one clip at a time here while the workers wait for the first round.
+
+    The numbers are those made here (a clip depends only on θ and its seed, and the
+    embedding comes back as the embedder gave it); if the workers fail, the clips are made
+    here instead.
+    """
+    from physinfer.evaluation import simulate_and_embed
+
+    if pool is None or pool.size < 2:
+        return None
+    executor, settings = pool.executor(), pool.settings
+
+    def embed(params: Sequence[Mapping[str, float]], seeds: Sequence[int]) -> list[np.ndarray | None]:
+        jobs = [ClipJob(settings, render_params, (), dict(p), int(s), as_embedded=True) for p, s in zip(params, seeds, strict=True)]
+        try:
+            return [future.result()[0] for future in [executor.submit(run_clip_job, job) for job in jobs]]
+        except Exception as exc:  # noqa: BLE001 - made here instead, as without workers
+            say(f"      re-simulations failed on a worker ({type(exc).__name__}: {exc}); running them here")
+            return [simulate_and_embed(base, p, render_params, s)[0] for p, s in zip(params, seeds, strict=True)]
+
+    return embed
 
 
 def concurrently(

@@ -25,6 +25,7 @@ from physinfer.io import atomic_save_npz, atomic_write_json
 from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
+    from physinfer.evaluation import ClipEmbedder
     from physinfer.loop import Pipeline
 
 GAP_FILE = "gap.json"
@@ -56,6 +57,7 @@ def measure_gap(
     seeds: Sequence[int],
     cache_dir: Path | None = None,
     cache_name: str = GAP_FILE,
+    embed_clips: ClipEmbedder | None = None,
 ) -> NoiseFloor:
     """Re-simulate ``params`` under ``seeds``; distances among them and to the target.
 
@@ -68,6 +70,7 @@ def measure_gap(
         cache_dir: Directory for the cache file; a cached measurement of the same θ and
             seeds is returned instead of re-simulating.
         cache_name: Name of the cache file in ``cache_dir``.
+        embed_clips: Make the re-simulations there (``None``: here); the same numbers.
 
     Returns:
         The :class:`~physinfer.noise.NoiseFloor`; its ``gap`` and ``floor`` are medians.
@@ -82,7 +85,9 @@ def measure_gap(
         stored = json.loads(path.read_text())
         if stored.get("key") == key:
             return _from_summary(params, stored["summary"], npz)
-    floor = measure_noise_floor(pipeline, params, render_params, seeds=seeds, target_embedding=target_embedding)
+    floor = measure_noise_floor(
+        pipeline, params, render_params, seeds=seeds, target_embedding=target_embedding, embed_clips=embed_clips
+    )
     if path is not None and npz is not None:
         atomic_save_npz(npz, embeddings=floor.embeddings, seeds=np.asarray(floor.seeds, dtype=np.int64))
         atomic_write_json(path, {"key": key, "summary": floor.summary()})

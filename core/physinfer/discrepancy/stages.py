@@ -31,6 +31,7 @@ from physinfer.session import fixed_by_user, optional_settings
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.evaluation import ClipEmbedder
 
 #: Called after each trial of a stage with its name, the trials done and the stage's budget.
 OnTrial = Callable[[str, int, int], None]
@@ -69,11 +70,13 @@ class GapContext:
         params: Mapping[str, float],
         stage: str,
         cache_name: str = "gap.json",
+        embed_clips: ClipEmbedder | None = None,
     ) -> NoiseFloor:
-        """The gap of ``params`` under ``pipeline``, cached in the stage's directory."""
+        """The gap of ``params`` under ``pipeline``, cached in the stage's directory
+        (``embed_clips``: its re-simulations made there)."""
         return measure_gap(
             pipeline, params, self.target.render_params, self.target_embedding, seeds=self.seeds,
-            cache_dir=self.out / stage, cache_name=cache_name,
+            cache_dir=self.out / stage, cache_name=cache_name, embed_clips=embed_clips,
         )  # fmt: skip
 
 
@@ -105,6 +108,7 @@ def run_stage(
     target_label: str,
     seed: int | None = None,
     on_trial: OnTrial | None = None,
+    embed_clips: ClipEmbedder | None = None,
 ) -> RefineResult:
     """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
 
@@ -119,6 +123,7 @@ def run_stage(
         target_label: Stored in ``run.json``.
         seed: Optimizer and simulation seed (``None``: the diagnosis seed).
         on_trial: Progress: called with ``(name, trials done, steps)`` after each trial.
+        embed_clips: Where the selection's re-simulations run (``None``: here).
     """
     seed = settings.seed if seed is None else seed
     space = pipeline.simulator.parameter_space
@@ -161,6 +166,7 @@ def run_stage(
         run_info=run_info,
         resume=resume,
         on_trial=report,
+        embed_clips=embed_clips,
     )
 
 

@@ -48,6 +48,7 @@ from physinfer.discrepancy.calibration_stage import (
     limit_scale,
     scale_text,
 )
+from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import (
     DecisionRule,
     effect_significance,
@@ -335,12 +336,14 @@ def _diagnose_stages(
     common = {"registry": registry, "settings": settings, "on_trial": bars.update}
     clock = StageClock()
 
-    # 1. The baseline (the workers start meanwhile).
+    # 1. The baseline (the workers start meanwhile, then make its re-simulations).
     pool.warm_up()
+    resimulate = pooled_clip_embedder(pool, base, target.render_params, say)
     say(f"[1/6] refining the baseline ({steps} trials)")
     with clock.stage("baseline"):
-        baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label, **common)
-        gap0 = gaps.measure(base, baseline.best_params, "baseline")
+        baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label,
+                             embed_clips=resimulate, **common)  # fmt: skip
+        gap0 = gaps.measure(base, baseline.best_params, "baseline", embed_clips=resimulate)
     screened: dict[str, dict[str, Any]] = {}
     if settings.screen:
         from physinfer.discrepancy.screen import refined_already, screen_effects
