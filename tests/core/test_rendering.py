@@ -167,6 +167,7 @@ def test_a_sequence_gives_pyrenders_own_pixels_frame_by_frame(rgba: bool) -> Non
     """render_sequence (frames replayed, uniforms not re-uploaded) against a plain
     ``pyrender.OffscreenRenderer`` rendering each frame from scratch: bit for bit."""
     import pyrender
+    from pyrender.shader_program import ShaderProgramCache
 
     frames = 12
     poses, positions, normals = animation(frames)
@@ -178,7 +179,14 @@ def test_a_sequence_gives_pyrenders_own_pixels_frame_by_frame(rgba: bool) -> Non
     finally:
         context.close()
     reference_scene, reference_moving, reference_primitive, _ = two_mesh_scene()
-    renderer = pyrender.OffscreenRenderer(40, 32)
+    # pyrender's own renderer, program cache and reader, in a context closed as ours are (a
+    # bare OffscreenRenderer's delete() would end the EGL display every context shares).
+    reference = OffscreenContext(40, 32)
+    reference._ensure_renderer()
+    renderer = reference._renderer
+    gl_renderer = renderer._renderer
+    gl_renderer._read_main_framebuffer = type(gl_renderer)._read_main_framebuffer.__get__(gl_renderer)
+    gl_renderer._program_cache = ShaderProgramCache()
     try:
         theirs = []
         for i in range(frames):
@@ -192,7 +200,7 @@ def test_a_sequence_gives_pyrenders_own_pixels_frame_by_frame(rgba: bool) -> Non
             flags = pyrender.RenderFlags.RGBA if rgba else pyrender.RenderFlags.NONE
             theirs.append(renderer.render(reference_scene, flags=flags)[0])
     finally:
-        renderer.delete()
+        reference.close()
     assert ours.shape == (frames, 32, 40, 4 if rgba else 3)
     assert len({frame.tobytes() for frame in ours}) == frames, "every frame differs"
     np.testing.assert_array_equal(ours, np.stack(theirs)[..., : ours.shape[-1]])
