@@ -445,12 +445,26 @@ def summarise(cases: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def strengths_of(args: argparse.Namespace, effect: str) -> list[float]:
+    """The power table's strengths for ``effect``: its ``--effect-strengths`` entry, else ``--strengths``."""
+    for item in getattr(args, "effect_strengths", None) or []:
+        name, sep, values = item.partition("=")
+        if not sep or not values:
+            raise SystemExit(f"--effect-strengths takes EFFECT=S,S,... (e.g. wind_yaw=0,0.5,1), got {item!r}")
+        if name == effect:
+            try:
+                return [float(v) for v in values.split(",")]
+            except ValueError:
+                raise SystemExit(f"--effect-strengths {item!r}: the strengths must be numbers") from None
+    return list(args.strengths)
+
+
 def power_cases(args: argparse.Namespace, effects: list[str]) -> list[tuple[str | None, float, int, str]]:
     """Every (hidden effect or None, strength, seed, effect) of the power table; strength 0 is clean."""
     rows = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         for effect in effects:
-            for strength in args.strengths:
+            for strength in strengths_of(args, effect):
                 rows.append((None if strength == 0 else effect, strength, seed, effect))
     return rows
 
@@ -603,6 +617,9 @@ def main() -> None:
                              "far end of its range; 0 is a clean target) for --seeds seeds; the named-rate per "
                              "strength, the false discoveries at 0 and the per-target limits' prediction")
     parser.add_argument("--strengths", type=float, nargs="*", default=[0.0, 0.25, 0.5, 1.0])
+    parser.add_argument("--effect-strengths", nargs="*", default=[], metavar="EFFECT=S,S,...",
+                        help="with --power: an effect's own strengths instead of --strengths (e.g. "
+                             "wind_yaw=0,0.25,0.5,1, where its limit lies lower than another's)")
     parser.add_argument("--plot", default=None, help="with --power: write the power curves to this PNG")
     parser.add_argument("--ladder-only", action="store_true",
                         help="no diagnosis: each seed's detection limits at its true base θ, the null scale "
@@ -708,7 +725,7 @@ def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> No
         print(json.dumps({"effect": effect, "strength": strength, "seed": seed, "named": case["named"],
                           "limit": lim.get("fraction"), "reason": lim.get("reason")}), file=sys.stderr, flush=True)
         rows[effect].append(case)
-    summaries = [summarise_power(rows[e], e, list(args.strengths)) for e in effects if rows[e]]
+    summaries = [summarise_power(rows[e], e, strengths_of(args, e)) for e in effects if rows[e]]
     if args.plot and summaries:
         plot_power(summaries, registry, args.plugin, Path(args.plot))
     print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "power": summaries,

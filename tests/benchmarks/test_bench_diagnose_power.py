@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import pytest
+
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCH))
 import bench_diagnose as bd  # noqa: E402
@@ -20,3 +22,16 @@ def test_power_shards_run_each_diagnosis_once_in_equal_shares() -> None:
     assert shards[0].isdisjoint(shards[1]) and shards[0] | shards[1] == distinct
     assert sorted(len(s) for s in shards) == [22, 23]
     assert bd.shard_of_power_cases(cases, 0, 1) == distinct
+
+
+def test_an_effect_can_have_its_own_strengths() -> None:
+    args = argparse.Namespace(first_seed=0, seeds=1, strengths=[0.0, 0.5, 1.0],
+                              effect_strengths=["wind_yaw=0,0.25,0.5,1"])
+    cases = bd.power_cases(args, ["wind_yaw", "wind_shear"])
+    assert [(h, s) for h, s, _, e in cases if e == "wind_yaw"] == [(None, 0.0), ("wind_yaw", 0.25), ("wind_yaw", 0.5),
+                                                                  ("wind_yaw", 1.0)]
+    assert [s for _, s, _, e in cases if e == "wind_shear"] == [0.0, 0.5, 1.0]
+    assert len({(h, s, seed) for h, s, seed, _ in cases}) == 1 + 3 + 2  # the clean target once
+    args.effect_strengths = ["wind_yaw:0,1"]
+    with pytest.raises(SystemExit, match="EFFECT=S,S"):
+        bd.power_cases(args, ["wind_yaw"])
