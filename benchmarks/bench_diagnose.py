@@ -621,6 +621,10 @@ def main() -> None:
                         help="with --power: an effect's own strengths instead of --strengths (e.g. "
                              "wind_yaw=0,0.25,0.5,1, where its limit lies lower than another's)")
     parser.add_argument("--plot", default=None, help="with --power: write the power curves to this PNG")
+    parser.add_argument("--rows", default=None, metavar="DIR",
+                        help="with --power: keep a copy of every finished case's row in DIR (e.g. a tracked "
+                             "folder) and take a case found there as done, so a table of hours can be run over "
+                             "several sessions; --merge --out DIR summarises them")
     parser.add_argument("--ladder-only", action="store_true",
                         help="no diagnosis: each seed's detection limits at its true base θ, the null scale "
                              "--null-over-floor noise floors (the flag, whose diagnoses do not fit a session)")
@@ -704,6 +708,28 @@ def main() -> None:
 
 
 
+def stored_row(args: argparse.Namespace, hidden: str | None, seed: int, strength: float | None) -> Path | None:
+    """A finished case's row: under ``--out``, else under ``--rows``; ``None`` if neither has it."""
+    dirs = [args.out] + ([args.rows] if getattr(args, "rows", None) else [])
+    files = [case_dir_of(args.plugin, hidden, seed, d, strength) / "case.json" for d in dirs]
+    return next((f for f in files if f.is_file()), None)
+
+
+def keep_row(args: argparse.Namespace, hidden: str | None, seed: int, strength: float | None,
+             row: dict[str, Any]) -> None:
+    """``--rows``: a copy of a finished row where it outlives ``--out`` (a tracked folder).
+
+    A table of hours is run over several sessions: the rows kept here are read back instead
+    of diagnosed again, and ``--merge --out ROWS`` summarises them with nothing else on disk.
+    """
+    if getattr(args, "rows", None):
+        from physinfer.io import atomic_write_json
+
+        target = case_dir_of(args.plugin, hidden, seed, args.rows, strength) / "case.json"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(target, row)
+
+
 def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> None:
     """``--power``: run (or, with ``--merge``, read) the power table and print its summary."""
     start = time.perf_counter()
@@ -712,15 +738,18 @@ def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> No
     cases = power_cases(args, effects)
     mine = shard_of_power_cases(cases, shard, n_shards)
     for hidden, strength, seed, effect in cases:
-        row_file = case_dir_of(args.plugin, hidden, seed, args.out, strength) / "case.json"
+        row_file = stored_row(args, hidden, seed, strength)
         if args.merge or (hidden, strength, seed) not in mine:
-            if row_file.is_file():
+            if row_file is not None:
                 rows[effect].append(json.loads(row_file.read_text()))
             elif args.merge:
-                print(f"missing: {row_file}", file=sys.stderr)
+                print(f"missing: {case_dir_of(args.plugin, hidden, seed, args.out, strength)}", file=sys.stderr)
             continue
-        case = json.loads(row_file.read_text()) if row_file.is_file() else run_case(
-            args.plugin, hidden, seed, args, strength)
+        if row_file is not None:
+            case = json.loads(row_file.read_text())
+        else:
+            case = run_case(args.plugin, hidden, seed, args, strength)
+            keep_row(args, hidden, seed, strength, case)
         lim = case["limits"].get(effect, {})
         print(json.dumps({"effect": effect, "strength": strength, "seed": seed, "named": case["named"],
                           "limit": lim.get("fraction"), "reason": lim.get("reason")}), file=sys.stderr, flush=True)

@@ -35,3 +35,20 @@ def test_an_effect_can_have_its_own_strengths() -> None:
     args.effect_strengths = ["wind_yaw:0,1"]
     with pytest.raises(SystemExit, match="EFFECT=S,S"):
         bd.power_cases(args, ["wind_yaw"])
+
+
+def test_rows_kept_in_a_tracked_folder_count_as_done(tmp_path: Path) -> None:
+    args = argparse.Namespace(plugin="flag_lite", out=str(tmp_path / "out"), rows=str(tmp_path / "rows"))
+    assert bd.stored_row(args, "wind_yaw", 100, 0.3) is None
+    bd.keep_row(args, "wind_yaw", 100, 0.3, {"named": "wind_yaw", "strength": 0.3})
+    kept = bd.stored_row(args, "wind_yaw", 100, 0.3)
+    assert kept == tmp_path / "rows" / "flag_lite-wind_yaw-p0.3-s100" / "case.json"
+    assert '"named": "wind_yaw"' in kept.read_text()
+    # A row under --out (the run's own directory) is read first.
+    own = bd.case_dir_of("flag_lite", "wind_yaw", 100, args.out, 0.3) / "case.json"
+    own.parent.mkdir(parents=True)
+    own.write_text("{}")
+    assert bd.stored_row(args, "wind_yaw", 100, 0.3) == own
+    args.rows = None
+    bd.keep_row(args, None, 100, 0.0, {})  # without --rows nothing is kept
+    assert bd.stored_row(args, None, 100, 0.0) is None
