@@ -636,7 +636,9 @@ def main() -> None:
     parser.add_argument("--timing", action="store_true",
                         help="diagnose each case twice, in one process and with --workers; wall times and "
                              "whether the decisions agree (exit 1 if any differs)")
-    parser.add_argument("--workers", type=int, default=None, help="with --timing: processes K (default: CPUs)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="with --timing: processes K (default: CPUs); with --power: each diagnosis' worker "
+                             "processes (default 1: every stage in the benchmark's own process)")
     parser.add_argument("--timing-modes", nargs="+", choices=sorted(TIMING_MODES), default=["needed", "screened"],
                         help="with --timing: the modes, before first (w1-all: one process, every self-consistency "
                              "run; all: K workers, every run; needed: K workers, the runs the decisions need)")
@@ -748,7 +750,8 @@ def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> No
         if row_file is not None:
             case = json.loads(row_file.read_text())
         else:
-            case = run_case(args.plugin, hidden, seed, args, strength)
+            # --workers: the stages side by side (the decisions do not depend on it); 1 by default.
+            case = run_case(args.plugin, hidden, seed, args, strength, workers=args.workers or 1)
             keep_row(args, hidden, seed, strength, case)
         lim = case["limits"].get(effect, {})
         print(json.dumps({"effect": effect, "strength": strength, "seed": seed, "named": case["named"],
