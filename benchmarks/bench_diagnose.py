@@ -622,7 +622,7 @@ def main() -> None:
                              "wind_yaw=0,0.25,0.5,1, where its limit lies lower than another's)")
     parser.add_argument("--plot", default=None, help="with --power: write the power curves to this PNG")
     parser.add_argument("--rows", default=None, metavar="DIR",
-                        help="with --power: keep a copy of every finished case's row in DIR (e.g. a tracked "
+                        help="keep a copy of every finished case's row in DIR (e.g. a tracked "
                              "folder) and take a case found there as done, so a table of hours can be run over "
                              "several sessions; --merge --out DIR summarises them")
     parser.add_argument("--ladder-only", action="store_true",
@@ -638,7 +638,7 @@ def main() -> None:
                              "whether the decisions agree (exit 1 if any differs)")
     parser.add_argument("--workers", type=int, default=None,
                         help="with --timing: processes K (default: CPUs); with --power: each diagnosis' worker "
-                             "processes (default 1: every stage in the benchmark's own process)")
+                             "processes, and likewise for a table (default 1: every stage in the benchmark's own process)")
     parser.add_argument("--timing-modes", nargs="+", choices=sorted(TIMING_MODES), default=["needed", "screened"],
                         help="with --timing: the modes, before first (w1-all: one process, every self-consistency "
                              "run; all: K workers, every run; needed: K workers, the runs the decisions need)")
@@ -676,16 +676,21 @@ def main() -> None:
     cases = []
     if args.merge:
         for hidden, seed in all_cases:
-            row_file = case_dir_of(args.plugin, hidden, seed, args.out) / "case.json"
-            if row_file.is_file():
+            row_file = stored_row(args, hidden, seed, None)
+            if row_file is not None:
                 cases.append(json.loads(row_file.read_text()))
             else:
-                print(f"missing: {row_file}", file=sys.stderr)
+                print(f"missing: {case_dir_of(args.plugin, hidden, seed, args.out)}", file=sys.stderr)
     else:
         shard, n_shards = parse_shard(args.shard)
         # By seed, so that each shard's finished cases cover every hidden effect.
         for hidden, seed in [(h, s) for h, s in all_cases if (s - args.first_seed) % n_shards == shard]:
-            case = run_case(args.plugin, hidden, seed, args)
+            kept = case_dir_of(args.plugin, hidden, seed, args.rows) / "case.json" if args.rows else None
+            if kept is not None and kept.is_file():  # kept by an earlier session: not run again
+                case = json.loads(kept.read_text())
+            else:  # (a row under --out alone is re-made from its stages: a changed rule re-decides)
+                case = run_case(args.plugin, hidden, seed, args, workers=args.workers or 1)
+                keep_row(args, hidden, seed, None, case)
             print(json.dumps({k: case[k] for k in ("hidden", "seed", "named", "misspecified", "gap_ratio")}),
                   file=sys.stderr, flush=True)
             cases.append(case)
