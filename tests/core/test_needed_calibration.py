@@ -19,8 +19,11 @@ def _signature(breakpoints):
     return lambda scale: tuple(scale < b for b in breakpoints)
 
 
-def _settle(a, b, floor, q95, breakpoints, summary="max"):
-    """Run the procedure against known gaps: ``a[r]`` the run's own, ``b[r]`` its control's."""
+def _settle(a, b, floor, q95, breakpoints, summary="max", workers=None):
+    """Run the procedure against known gaps: ``a[r]`` the run's own, ``b[r]`` its control's;
+    with ``workers``, a round's controls as the workflow picks them (no more than ``workers``)."""
+    from physinfer.discrepancy.calibration_stage import one_round_of_controls
+
     runs = [CalibrationRun(r) for r in range(len(a))]
     signature = _signature(breakpoints)
     refined = []
@@ -28,6 +31,8 @@ def _settle(a, b, floor, q95, breakpoints, summary="max"):
         todo, with_control = next_to_refine(runs, floor, q95, summary, signature)
         if not todo:
             break
+        if with_control and workers is not None:
+            todo = one_round_of_controls(todo, runs, workers)
         for r in todo:
             runs[r].update({"gap_run": a[r], "gap_control": b[r] if with_control else None}, final=with_control)
             refined.append((r, with_control))
@@ -36,18 +41,46 @@ def _settle(a, b, floor, q95, breakpoints, summary="max"):
     return runs, refined, (lo, hi), signature(lo) == signature(true_scale)
 
 
+@pytest.mark.parametrize("workers", [None, 1, 2])
 @pytest.mark.parametrize("summary", ["max", "median"])
-def test_the_decisions_are_those_of_every_run_refined(summary):
+def test_the_decisions_are_those_of_every_run_refined(summary, workers):
     rng = np.random.default_rng(0)
     for _ in range(400):
         n = int(rng.integers(1, 5))
         a = rng.uniform(0, 10, n)
         b = a * rng.uniform(0.1, 1.2, n)  # a control may end worse than its run: the gap is the smaller
-        floor = float(rng.uniform(0, 5))
+        floor = float(rng.uniform(0, 5)) * (rng.uniform() < 0.8)  # a deterministic phenomenon's floor is 0
         breakpoints = sorted(rng.uniform(0, 12, int(rng.integers(0, 4))))
-        runs, _, (lo, hi), same = _settle(a, b, floor, floor * 1.5, breakpoints, summary)
+        runs, _, (lo, hi), same = _settle(a, b, floor, floor * 1.5, breakpoints, summary, workers)
         assert same, (a, b, floor, breakpoints)
         assert lo <= hi
+
+
+def test_a_round_refines_no_more_controls_than_workers_the_largest_first_stage_gaps_first():
+    from physinfer.discrepancy.calibration_stage import one_round_of_controls
+
+    runs = [CalibrationRun(r, gap_run=g) for r, g in enumerate([5.0, 0.5, 3.3, 9.0])]
+    assert one_round_of_controls([0, 1, 2, 3], runs, 2) == [0, 3]
+    assert one_round_of_controls([0, 1, 2], runs, 2) == [0, 2]
+    assert one_round_of_controls([1, 2], runs, 4) == [1, 2]
+    assert one_round_of_controls([0, 1, 2, 3], runs, 1) == [3]  # in one process: one at a time
+    assert one_round_of_controls([0, 1, 2, 3], runs, 0) == [3]
+
+
+def test_a_deterministic_phenomenon_sends_every_first_stage_with_the_control_and_effects():
+    """A noise floor of 0 leaves the null scale anywhere from 0 up: every run's first stage is
+    needed, and goes with the first round; otherwise only where a worker would idle."""
+    from physinfer.discrepancy.calibration_stage import first_calibration_jobs
+    from physinfer.discrepancy.workflow import DiagnoseSettings
+
+    settings = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibration_runs=3)
+    assert first_calibration_jobs(settings, ["drag"], 2, floor=0.0) == [(0, False), (1, False), (2, False)]
+    assert first_calibration_jobs(settings, ["drag"], 2, floor=0.3) == []  # control + drag fill the round
+    assert first_calibration_jobs(settings, ["drag", "yaw"], 2, floor=0.3) == [(0, False)]
+    every = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibration_runs=2, calibrate_all=True)
+    assert first_calibration_jobs(every, ["drag"], 2, floor=0.0) == [(0, True), (1, True)]
+    none = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibrate=False)
+    assert first_calibration_jobs(none, ["drag"], 2, floor=0.0) == []
 
 
 def test_nothing_is_refined_when_no_scale_above_the_floor_changes_a_decision():
@@ -141,3 +174,28 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     # A re-run reads every stage back and decides the same without refining anything.
     again = _diagnose(tmp_path / "needed", target, **kw)
     assert again["calibration"] == needed["calibration"] and again["named_effect"] == needed["named_effect"]
+
+
+def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_the_control(tmp_path: Path):
+    """The pendulum's floor is 0: its three first stages run in the round of the control and
+    the drag model (five jobs), a later round refines no more controls than there are workers,
+    and the decisions are those of refining every run."""
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.plugins import load_registry
+    from tests.core.test_diagnose import _diagnose, _pendulum_target
+
+    target = _pendulum_target(tmp_path, "quadratic_drag")
+    lines: list[str] = []
+    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path / "w2", target_path=target, render_set={"size": 48},
+                                steps=3, optimizer="random", floor_samples=4, videos=False, limits=False, workers=2)
+    report = run_diagnosis(load_registry()[0], settings, log=lines.append)
+    assert report["noise_floor"] == 0
+    rounds = [line.strip() for line in lines if "run side by side" in line]
+    assert rounds[0].startswith("5 jobs run side by side"), lines
+    assert all(not r.startswith(("3 jobs", "4 jobs")) for r in rounds[1:]), rounds  # at most 2 controls a round
+    full = _diagnose(tmp_path / "all", target, steps=3, optimizer="random", limits=False, calibrate_all=True)
+    for key in ("misspecified", "gap_test", "named_effect", "tested_gap"):
+        assert report[key] == full[key], key
+    assert [c["significant"] for c in report["candidates"]] == [c["significant"] for c in full["candidates"]]
+    for run in report["calibration"]:
+        assert run["gap_run"] == full["calibration"][run["run"]]["gap_run"]  # every first stage ran, the same

@@ -34,16 +34,27 @@ def _signature(judged: Judge) -> Callable[[float], Any]:
     return signature
 
 
-def first_calibration_jobs(settings: DiagnoseSettings, effects: list[str], workers: int) -> list[tuple[int, bool]]:
+def first_calibration_jobs(
+    settings: DiagnoseSettings, effects: list[str], workers: int, floor: float
+) -> list[tuple[int, bool]]:
     """The self-consistency jobs sent with the control and the effects: every run with its
-    control under ``calibrate_all``; otherwise first stages only where one of ``workers``
-    would idle (the control and effect jobs not filling the last round), which costs no
-    wall time."""
+    control under ``calibrate_all``; every run's first stage where the noise ``floor`` is 0;
+    otherwise first stages only where one of ``workers`` would idle (the control and effect
+    jobs not filling the last round), which costs no wall time.
+
+    With a floor of 0 (a deterministic phenomenon) the null scale may be anything from 0 up
+    before the runs are refined, and at 0 the gap test fires on any gap above 0 while at an
+    unbounded scale nothing does: the decisions differ, and :func:`next_to_refine` asks for
+    every run's first stage whatever the control and the effects find. Sent with them, the
+    first stages fill the round's idle slots instead of making rounds of their own.
+    """
     if not settings.calibrate:
         return []
     runs = range(settings.calibration_runs)
     if settings.calibrate_all:
         return [(r, True) for r in runs]
+    if floor == 0:
+        return [(r, False) for r in runs]
     idle = (-(1 + len(effects))) % workers if workers > 1 else 0
     return [(r, False) for r in runs[:idle]]
 
@@ -56,6 +67,15 @@ def with_idle_controls(todo: list[int], with_control: bool, workers: int) -> lis
     rounds = -(-len(todo) // workers) if workers > 1 else 0
     spare = rounds * workers - len(todo) if not with_control and rounds >= 2 else 0
     return [(r, with_control or i < spare) for i, r in enumerate(todo)]
+
+
+def one_round_of_controls(todo: list[int], runs: list[CalibrationRun], workers: int) -> list[int]:
+    """The controls of ``todo`` to refine in one round: no more than there are workers, those
+    of the largest first-stage gaps first (a control can only lower its run's gap, and the
+    largest bound the null scale's range from above), so that what one round finds can
+    settle the rest before another round is spent on them."""
+    ranked = sorted(todo, key=lambda r: (-(runs[r].gap_run if runs[r].gap_run is not None else math.inf), r))
+    return sorted(ranked[: max(1, workers)])
 
 
 def calibrate(
@@ -117,6 +137,8 @@ def calibrate(
         todo, with_control = next_to_refine(runs, gap0.floor, gap0.floor_q95, summary, signature)
         if not todo:
             break
+        if with_control:
+            todo = one_round_of_controls(todo, runs, pool.size)
         lo, hi = scale_bounds(runs, gap0.floor, gap0.floor_q95, summary)
         what = "their controls" if with_control else f"the baseline against its own fit, {job_args['steps']} trials each"
         say(f"[4/6] self-consistency: the decisions differ between null scales {lo:.4g} and "

@@ -363,7 +363,7 @@ def _diagnose_stages(
         "baseline_best": baseline.best_params, "target": target, "target_embedding": target_embedding,
         "seeds": seeds, "steps": steps, "effect_steps": effect_steps, "target_label": target_label,
     }  # fmt: skip
-    jobs = stage_jobs(settings, effects, **job_args, calibration=first_calibration_jobs(settings, effects, pool.size))
+    jobs = stage_jobs(settings, effects, **job_args, calibration=first_calibration_jobs(settings, effects, pool.size, gap0.floor))
     workers = run_on_workers(pool, jobs, bars, clock, say)
 
     # 2. Equal-budget control and one augmented model per effect, all warm-started.
