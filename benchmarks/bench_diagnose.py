@@ -305,6 +305,24 @@ TIMING_MODES = {
 }
 
 
+def decision(row: dict[str, Any]) -> tuple[Any, ...]:
+    """A case's decisions, comparable: the named effect, misspecified, each candidate's significance."""
+    return row["named"], row["misspecified"], tuple((e, c["significant"]) for e, c in sorted(row["candidates"].items()))
+
+
+def changed_decisions(cases: list[dict[str, Any]], expected_dir: str, plugin: str) -> list[str]:
+    """``--expect DIR``: one line per case whose decisions differ from its row kept under ``DIR``
+    (a case DIR has no row for is listed too: a comparison that compared nothing is no pass)."""
+    lines = []
+    for case in cases:
+        kept = case_dir_of(plugin, case["hidden"], case["seed"], expected_dir, case.get("strength")) / "case.json"
+        if not kept.is_file():
+            lines.append(f"{kept.parent.name}: no stored row to compare with")
+        elif (old := decision(json.loads(kept.read_text()))) != (new := decision(case)):
+            lines.append(f"{kept.parent.name}: stored {old}, now {new}")
+    return lines
+
+
 def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]) -> dict[str, Any]:
     """Each case diagnosed from scratch once per ``--timing-modes`` mode (the first is
     "before", the last "after"); wall time per diagnosis and per stage, and whether every
@@ -330,8 +348,7 @@ def run_timing(args: argparse.Namespace, all_cases: list[tuple[str | None, int]]
             print(json.dumps({"hidden": hidden, "seed": seed, "mode": mode, "named": runs[mode]["named"],
                               "misspecified": runs[mode]["misspecified"],
                               "wall_time_s": round(runs[mode]["wall_time_s"], 1)}), file=sys.stderr, flush=True)
-        decisions = {(r["named"], r["misspecified"], tuple(c["significant"] for _, c in sorted(r["candidates"].items())))
-                     for r in runs.values()}  # fmt: skip
+        decisions = {decision(r) for r in runs.values()}
         same += len(decisions) == 1
         first = runs[modes[0]]
         rows.append({"hidden": hidden, "seed": seed, "named": first["named"], "misspecified": first["misspecified"],
@@ -625,6 +642,10 @@ def main() -> None:
                         help="keep a copy of every finished case's row in DIR (e.g. a tracked "
                              "folder) and take a case found there as done, so a table of hours can be run over "
                              "several sessions; --merge --out DIR summarises them")
+    parser.add_argument("--expect", default=None, metavar="DIR",
+                        help="compare every case's decisions (named, misspecified, each candidate's significance) "
+                             "with its row kept under DIR (e.g. benchmarks/results/pendulum_table) and exit 1 on "
+                             "any difference or missing row")
     parser.add_argument("--ladder-only", action="store_true",
                         help="no diagnosis: each seed's detection limits at its true base θ, the null scale "
                              "--null-over-floor noise floors (the flag, whose diagnoses do not fit a session)")
@@ -711,7 +732,13 @@ def main() -> None:
         "wall_time_s": time.perf_counter() - start,
         "cases": cases,
     }
+    changed = changed_decisions(cases, args.expect, args.plugin) if args.expect else []
+    if args.expect:
+        out["changed_decisions"] = changed
     print(json.dumps(out))
+    if changed:
+        print("decisions differ from " + args.expect + ":\n  " + "\n  ".join(changed), file=sys.stderr)
+        sys.exit(1)
 
 
 

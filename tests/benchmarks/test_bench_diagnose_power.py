@@ -76,3 +76,20 @@ def test_the_power_summary_reads_the_half_way_strength_and_the_limits_prediction
     # Never named: no half-way strength, no ratio.
     never = bd.summarise_power([_row(0.5, None, None), _row(1.0, None, None)], "wind_yaw", [0.5, 1.0])
     assert never["s50"] is None and never["median_limit"] is None and never["limit_over_s50"] is None
+
+
+def test_expect_lists_every_case_whose_decisions_changed_and_every_case_it_cannot_compare(tmp_path: Path) -> None:
+    def row(seed: int, named: str | None, misspecified: bool, significant: bool) -> dict:
+        return {"hidden": "wind_yaw", "seed": seed, "strength": None, "named": named, "misspecified": misspecified,
+                "candidates": {"wind_yaw": {"significant": significant, "gap": 1.0}}}
+
+    stored = tmp_path / "stored"
+    args = argparse.Namespace(plugin="flag_lite", out=str(tmp_path / "out"), rows=str(stored))
+    for seed, named in ((0, "wind_yaw"), (1, None)):
+        bd.keep_row(args, "wind_yaw", seed, None, row(seed, named, named is not None, named is not None))
+    same = [row(0, "wind_yaw", True, True) | {"gap_ratio": 0.1}, row(1, None, False, False)]  # other numbers: same
+    assert bd.changed_decisions(same, str(stored), "flag_lite") == []
+    lost = [row(0, None, True, False), row(1, None, False, False), row(2, None, False, False)]
+    changed = bd.changed_decisions(lost, str(stored), "flag_lite")
+    assert len(changed) == 2 and changed[0].startswith("flag_lite-wind_yaw-s0: stored ('wind_yaw', True")
+    assert changed[1] == "flag_lite-wind_yaw-s2: no stored row to compare with"
