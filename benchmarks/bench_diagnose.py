@@ -508,17 +508,26 @@ def _crossing(xs: list[float], ys: list[float], level: float) -> float | None:
 
 
 def summarise_power(rows: list[dict[str, Any]], effect: str, strengths: list[float]) -> dict[str, Any]:
-    """Named-rate against strength, the ladder's prediction of it, and the two half-way strengths.
+    """Named-rate against strength, the ladders' predictions of it, and the half-way strengths.
 
-    The prediction for one target: its effect would be named at strength ``s`` if the limit
-    that its own diagnosis reported (a fraction of the path) is at most ``s``. The strength
-    named half the time (``s50``, interpolated) is compared with the median per-target limit
+    Two predictions for one target at strength ``s``: its effect would be named if the limit
+    that its own diagnosis reported (a fraction of the path) is at most ``s``
+    (``predicted_rate``), or if the limit reported for the *clean* target of the same seed — the
+    same scene, base θ and seeds without the effect: what ``diagnose`` tells a user whose video
+    showed nothing — is at most ``s`` (``predicted_from_clean``; the claim "this clip could
+    reveal it from L" put to the test). The strength named half the time (``s50``,
+    interpolated) is compared with the median limit over every target and over the clean ones
     (a target whose effect has no limit counts as beyond the range).
     """
+    def limit_of(row: dict[str, Any]) -> float | None:
+        return row["limits"].get(effect, {}).get("fraction")
+
+    clean_limit = {r["seed"]: limit_of(r) for r in rows if r["strength"] == 0}
     per = []
     for s in strengths:
         group = [r for r in rows if r["strength"] == s]
-        limits = [r["limits"].get(effect, {}).get("fraction") for r in group]
+        limits = [limit_of(r) for r in group]
+        from_clean = [clean_limit.get(r["seed"]) for r in group]
         per.append({
             "strength": s,
             "n": len(group),
@@ -526,13 +535,14 @@ def summarise_power(rows: list[dict[str, Any]], effect: str, strengths: list[flo
             "named_other": sum(r["named"] not in (None, effect) for r in group),
             "misspecified": sum(bool(r["misspecified"]) for r in group),
             "named_rate": (sum(r["named"] == effect for r in group) / len(group)) if group else None,
-            "predicted_rate": (sum(f is not None and f <= s for f in limits) / len(group)) if group and s > 0 else 0.0,
+            "predicted_rate": _share_at_most(limits, s),
+            "predicted_from_clean": _share_at_most(from_clean, s),
             "limits": limits,
         })
     curve = [p for p in per if p["n"]]
     s50 = _crossing([p["strength"] for p in curve], [p["named_rate"] for p in curve], 0.5)
-    every = sorted(math.inf if f is None else f for p in per for f in p["limits"])
-    median_limit = statistics.median(every) if every else None
+    median_limit = _median_limit([f for p in per for f in p["limits"]])
+    median_clean = _median_limit(list(clean_limit.values()))
     clean = next((p for p in per if p["strength"] == 0), None)
     return {
         "effect": effect,
@@ -541,13 +551,29 @@ def summarise_power(rows: list[dict[str, Any]], effect: str, strengths: list[flo
             bool(r["misspecified"]) or r["named"] is not None for r in rows if r["strength"] == 0),
         "n_clean": 0 if clean is None else clean["n"],
         "s50": s50,
-        "median_limit": None if median_limit is None or math.isinf(median_limit) else median_limit,
-        "limit_over_s50": (median_limit / s50) if s50 and median_limit and math.isfinite(median_limit) else None,
+        "median_limit": median_limit,
+        "limit_over_s50": (median_limit / s50) if s50 and median_limit else None,
+        "median_clean_limit": median_clean,
+        "clean_limit_over_s50": (median_clean / s50) if s50 and median_clean else None,
     }
 
 
+def _share_at_most(limits: list[float | None], strength: float) -> float:
+    """The share of ``limits`` at most ``strength`` (none: beyond the range); 0 at strength 0."""
+    if not limits or strength <= 0:
+        return 0.0
+    return sum(f is not None and f <= strength for f in limits) / len(limits)
+
+
+def _median_limit(limits: list[float | None]) -> float | None:
+    """The median of ``limits``, a missing one counted as beyond the range; ``None`` if that is the median."""
+    every = sorted(math.inf if f is None else f for f in limits)
+    median = statistics.median(every) if every else math.inf
+    return None if math.isinf(median) else median
+
+
 def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path: Path) -> None:
-    """Named-rate (observed, and predicted by the per-target limits) against strength, one panel per effect."""
+    """Named-rate (observed, and predicted by the limits) against strength, one panel per effect."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -555,7 +581,7 @@ def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path
 
     from physinfer.discrepancy.limits import strength_path, values_at
 
-    fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 3.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 4.0), squeeze=False)
     for ax, summ in zip(axes[0], summaries, strict=True):
         effect_space = registry.effect(summ["effect"], phenomenon=plugin_name(registry, plugin)).parameter_space
         moved, held = strength_path(effect_space)
@@ -564,20 +590,24 @@ def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path
         def value(f: float, moved: Any = moved, held: Any = held, space: Any = effect_space, name: str = name) -> float:
             return values_at(space, moved, held, f)[name]
 
-        xs = [value(p["strength"]) for p in summ["curve"]]
-        ax.plot(xs, [p["named_rate"] for p in summ["curve"]], "o-", label="named (diagnoses)")
-        ax.plot(xs, [p["predicted_rate"] for p in summ["curve"]], "s--", label="predicted (per-target limit)")
-        if summ["s50"] is not None:
-            ax.axvline(value(summ["s50"]), color="C0", lw=0.8, ls=":", label="named half the time")
-        if summ["median_limit"] is not None:
-            ax.axvline(value(summ["median_limit"]), color="C1", lw=0.8, ls=":", label="median limit")
+        curve = [p for p in summ["curve"] if p["n"]]  # strengths with no finished target yet are left out
+        xs = [value(p["strength"]) for p in curve]
+        ax.plot(xs, [p["named_rate"] for p in curve], "o-", label="named (diagnoses)")
+        ax.plot(xs, [p["predicted_rate"] for p in curve], "s--", label="predicted (its own limit)")
+        ax.plot(xs, [p["predicted_from_clean"] for p in curve], "^:", label="predicted (clean target's limit)")
+        for key, colour, label in (("s50", "C0", "named half the time"), ("median_limit", "C1", "median limit"),
+                                   ("median_clean_limit", "C2", "median clean-target limit")):
+            if summ[key] is not None:
+                ax.axvline(value(summ[key]), color=colour, lw=0.8, ls=":", label=label)
         ax.set_xlabel(name)
         ax.set_ylabel("share of targets")
         ax.set_ylim(-0.05, 1.05)
         fd = summ["false_discoveries"]
         ax.set_title(f"{summ['effect']}  (false discoveries at 0: {fd}/{summ['n_clean']})", fontsize=9)
-        ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
+    # One legend for every panel, below them (inside, it hid the curves).
+    handles = {label: h for ax in axes[0] for h, label in zip(*ax.get_legend_handles_labels(), strict=True)}
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=3, fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -54,25 +54,29 @@ def test_rows_kept_in_a_tracked_folder_count_as_done(tmp_path: Path) -> None:
     assert bd.stored_row(args, None, 100, 0.0) is None
 
 
-def _row(strength: float, named: str | None, limit: float | None, misspecified: bool = False) -> dict:
-    return {"strength": strength, "named": named, "misspecified": misspecified or named is not None,
+def _row(strength: float, named: str | None, limit: float | None, misspecified: bool = False, seed: int = 0) -> dict:
+    return {"strength": strength, "seed": seed, "named": named, "misspecified": misspecified or named is not None,
             "limits": {"wind_yaw": {"fraction": limit}}}
 
 
 def test_the_power_summary_reads_the_half_way_strength_and_the_limits_prediction() -> None:
     rows = [
-        _row(0.0, None, 0.3), _row(0.0, None, None, misspecified=True),  # one false discovery
-        _row(0.25, None, 0.3), _row(0.25, "wind_yaw", 0.2),  # 1 of 2 named; one limit <= 0.25
-        _row(0.5, "wind_yaw", 0.4), _row(0.5, "wind_yaw", None),  # 2 of 2; the second "mimicked"
+        _row(0.0, None, 0.3, seed=0), _row(0.0, None, None, misspecified=True, seed=1),  # one false discovery
+        _row(0.25, None, 0.3, seed=0), _row(0.25, "wind_yaw", 0.2, seed=1),  # 1 of 2 named; one limit <= 0.25
+        _row(0.5, "wind_yaw", 0.4, seed=0), _row(0.5, "wind_yaw", None, seed=1),  # 2 of 2; the second "mimicked"
     ]
-    summary = bd.summarise_power(rows, "wind_yaw", [0.0, 0.25, 0.5])
+    summary = bd.summarise_power(rows, "wind_yaw", [0.0, 0.1, 0.25, 0.5])
     curve = {p["strength"]: p for p in summary["curve"]}
+    assert curve[0.1]["n"] == 0 and curve[0.1]["named_rate"] is None  # a strength not run yet
     assert [curve[s]["named_rate"] for s in (0.0, 0.25, 0.5)] == [0.0, 0.5, 1.0]
     assert [curve[s]["predicted_rate"] for s in (0.0, 0.25, 0.5)] == [0.0, 0.5, 0.5]
+    # From each seed's clean target: seed 0 from 0.3, seed 1 beyond the range.
+    assert [curve[s]["predicted_from_clean"] for s in (0.0, 0.25, 0.5)] == [0.0, 0.0, 0.5]
     assert summary["false_discoveries"] == 1 and summary["n_clean"] == 2
     assert summary["s50"] == 0.25  # the named-rate reaches one half there
     # Six limits, two of them none (beyond the range): the median of 0.2, 0.3, 0.3, 0.4, inf, inf.
     assert summary["median_limit"] == 0.35 and summary["limit_over_s50"] == 0.35 / 0.25
+    assert summary["median_clean_limit"] is None  # 0.3 and beyond the range: the median is beyond too
     # Never named: no half-way strength, no ratio.
     never = bd.summarise_power([_row(0.5, None, None), _row(1.0, None, None)], "wind_yaw", [0.5, 1.0])
     assert never["s50"] is None and never["median_limit"] is None and never["limit_over_s50"] is None
