@@ -822,9 +822,15 @@ def run_power(args: argparse.Namespace, registry: Any, effects: list[str]) -> No
     summaries = [summarise_power(rows[e], e, strengths_of(args, e)) for e in effects if rows[e]]
     if args.plot and summaries:
         plot_power(summaries, registry, args.plugin, Path(args.plot))
+    # A clean target serves every effect's curve: compared once.
+    every = list({(r["hidden"], r["seed"], r.get("strength")): r for e in effects for r in rows[e]}.values())
+    changed = changed_decisions(every, args.expect, args.plugin) if args.expect else []
     print(json.dumps({"plugin": args.plugin, "settings": dict(vars(args)), "power": summaries,
-                      "wall_time_s": time.perf_counter() - start,
-                      "cases": [r for e in effects for r in rows[e]]}))
+                      "wall_time_s": time.perf_counter() - start, "cases": every,
+                      **({"changed_decisions": changed} if args.expect else {})}))
+    if changed:
+        print("decisions differ from " + args.expect + ":\n  " + "\n  ".join(changed), file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -97,3 +97,26 @@ def test_expect_lists_every_case_whose_decisions_changed_and_every_case_it_canno
     changed = bd.changed_decisions(lost, str(stored), "flag_lite")
     assert len(changed) == 2 and changed[0].startswith("flag_lite-wind_yaw-s0: stored ('wind_yaw', True")
     assert changed[1] == "flag_lite-wind_yaw-s2: no stored row to compare with"
+
+
+def test_power_merge_with_expect_fails_on_a_changed_decision(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    def row(hidden: str | None, strength: float, named: str | None) -> dict:
+        return {"hidden": hidden, "seed": 100, "strength": strength, "named": named, "misspecified": named is not None,
+                "candidates": {"wind_yaw": {"significant": named is not None}}, "limits": {}}
+
+    stored, rerun = tmp_path / "stored", tmp_path / "rerun"
+    args = argparse.Namespace(plugin="flag_lite", power=True, merge=True, out=str(rerun), rows=None, expect=str(stored),
+                              first_seed=100, seeds=1, strengths=[0.0, 0.5], effect_strengths=[], shard=None,
+                              plot=None, workers=None)
+    for folder, named in ((stored, "wind_yaw"), (rerun, "wind_yaw")):
+        bd.keep_row(argparse.Namespace(plugin="flag_lite", rows=str(folder)), None, 100, 0.0, row(None, 0.0, None))
+        bd.keep_row(argparse.Namespace(plugin="flag_lite", rows=str(folder)), "wind_yaw", 100, 0.5,
+                    row("wind_yaw", 0.5, named))
+    bd.run_power(args, None, ["wind_yaw"])  # the same decisions: passes
+    assert '"changed_decisions": []' in capsys.readouterr().out
+    bd.keep_row(argparse.Namespace(plugin="flag_lite", rows=str(rerun)), "wind_yaw", 100, 0.5,
+                row("wind_yaw", 0.5, None))
+    with pytest.raises(SystemExit) as exit_:
+        bd.run_power(args, None, ["wind_yaw"])
+    assert exit_.value.code == 1
+    assert "flag_lite-wind_yaw-p0.5-s100: stored ('wind_yaw'" in capsys.readouterr().err
