@@ -605,3 +605,20 @@ def test_the_batch_size_is_the_phenomenons_unless_given(tmp_path: Path):
     assert one["settings"]["batch_size"] == 1
     with pytest.raises(UserInputError, match="--batch-size must be at least 1"):
         _diagnose(tmp_path / "zero", target, batch_size=0, **kw)
+
+
+def test_a_name_whose_model_still_fails_the_gap_test_comes_with_a_warning():
+    from physinfer.discrepancy.decide import remainder_after_naming
+    from physinfer.report.diagnose_page import verdict
+
+    # The power curves' case: gusts (screened out) stood in for by yaw, which left 353 > 181.
+    leaves = remainder_after_naming("wind_yaw", 353.4, 180.9)
+    assert leaves["effect"] == "wind_yaw" and leaves["gap"] == 353.4 and leaves["threshold"] == 180.9
+    assert "still above the gap-test threshold 180.9" in leaves["message"]
+    assert remainder_after_naming("wind_yaw", 17.4, 71.4) is None  # the named model passes
+    assert remainder_after_naming(None, 353.4, 180.9) is None  # nothing named
+    # No null scale measured (a deterministic phenomenon's threshold of 0): no warning from it.
+    assert remainder_after_naming("quadratic_drag", 1.59, 0.0) is None
+    page = verdict({"misspecified": True, "named_effect": "wind_yaw", "named_leaves": leaves})
+    assert "named effect: wind_yaw" in page and "but wind_yaw leaves a gap of 353.4" in page
+    assert "but " not in verdict({"misspecified": True, "named_effect": "wind_yaw", "named_leaves": None})

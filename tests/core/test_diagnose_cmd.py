@@ -62,6 +62,7 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     assert not report["gap_test"] and report["gap_before"] < report["threshold"]
     assert report["misspecified"] and report["misspecified_by"] == ["effect"]
     assert report["named_effect"] == "quadratic_drag" and report["candidates"][0]["significant"]
+    assert report["named_leaves"] is None  # the drag model's gap passes the gap test
     assert "misspecified True (by an effect's significant improvement)" in " ".join(proc.stderr.split())
     # One line per candidate with its detection limit on this clip.
     assert "quadratic_drag: named; this 4-s clip could" in " ".join(proc.stderr.split())

@@ -180,9 +180,10 @@ def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_th
     """The pendulum's floor is 0: its three first stages run in the round of the control and
     the drag model (five jobs), a later round refines no more controls than there are workers,
     and the decisions are those of refining every run."""
+    from tests.core.test_diagnose import _diagnose, _pendulum_target
+
     from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
     from physinfer.plugins import load_registry
-    from tests.core.test_diagnose import _diagnose, _pendulum_target
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
     lines: list[str] = []

@@ -199,6 +199,8 @@ def diagnose_cmd(
     for c in report.get("screened") or []:
         err_console.print(f"  {screened_line(c)}", highlight=False)
     err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
+    if leaves := report.get("named_leaves"):
+        err_console.print(f"  [yellow]but[/] {leaves['message']}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 
 

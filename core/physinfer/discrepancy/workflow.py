@@ -55,6 +55,7 @@ from physinfer.discrepancy.decide import (
     final_verdict,
     misspecification,
     name_effect,
+    remainder_after_naming,
     self_consistency_gap,
 )
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
@@ -413,6 +414,9 @@ def _diagnose_stages(
         say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
     after = next((s for s in stages if s.label == named), before)
     say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
+    remainder = remainder_after_naming(named, float(after.gap.gap), float(verdict["threshold"]))
+    if remainder is not None:
+        say("      " + remainder["message"])
     limits = None
     if settings.limits:
         runs = settings.calibration_runs if settings.calibrate else 0
@@ -435,6 +439,7 @@ def _diagnose_stages(
             settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
             baseline,
         )
+    report["named_leaves"] = remainder
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}

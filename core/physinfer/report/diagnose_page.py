@@ -86,6 +86,8 @@ def verdict(report: Mapping[str, Any]) -> str:
     )
     if report.get("misspecified_by"):
         lines.append("evidence: " + ", ".join(str(e) for e in report["misspecified_by"]))
+    if report.get("named_leaves"):
+        lines.append("but " + str(report["named_leaves"]["message"]))
     return f'<div class="{cls}">' + "<br>".join(escape(line) for line in lines) + "</div>"
 
 
