@@ -278,4 +278,3 @@ def remainder_after_naming(named: str | None, gap_after: float, threshold: float
                     f"{threshold:.4g}: it explains part of the gap; another missing effect may be at work, "
                     f"or {named} stands in for one"),
     }
-
