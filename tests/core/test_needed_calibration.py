@@ -200,3 +200,16 @@ def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_th
     assert [c["significant"] for c in report["candidates"]] == [c["significant"] for c in full["candidates"]]
     for run in report["calibration"]:
         assert run["gap_run"] == full["calibration"][run["run"]]["gap_run"]  # every first stage ran, the same
+
+
+def test_a_null_scale_set_by_the_baseline_fits_floor_says_so():
+    from physinfer.discrepancy.needed_calibration import null_scale_words
+
+    # Hidden-yaw seed 4: the baseline stalled where the flag is chaotic (floor 139); the tested
+    # fit (the control) has a floor of 64. Without the note "noise floor 64.4, null scale 139"
+    # reads as a contradiction.
+    report = {"null_scale": 139.0, "null_scale_range": [139.0, None], "noise_floor": 64.4, "baseline": {"floor": 139.0}}
+    assert null_scale_words(report) == "null scale 139 (the noise floor at the baseline fit; any of 139–∞ gives these decisions)"
+    # The tested fit is the baseline (one floor), or the scale is a self-consistency gap: no note.
+    assert null_scale_words({**report, "noise_floor": 139.0}) == "null scale 139 (any of 139–∞ gives these decisions)"
+    assert null_scale_words({**report, "null_scale": 150.0, "null_scale_range": [150.0, 150.0]}) == "null scale 150"

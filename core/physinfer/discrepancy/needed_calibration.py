@@ -135,13 +135,22 @@ def next_to_refine(
 
 def null_scale_words(report: Mapping[str, Any]) -> str:
     """``null scale 31.2``, or its range where self-consistency runs were skipped:
-    ``null scale 20.1 (any of 20.1–∞ gives these decisions)``."""
+    ``null scale 20.1 (any of 20.1–∞ gives these decisions)``; where the scale is the noise
+    floor at the baseline fit and the report's ``noise_floor`` (the tested fit's) differs, it
+    says so, or a reader could not tell where the number came from."""
     scale = report.get("null_scale")
     lo, hi = report.get("null_scale_range") or (scale, scale)
-    text = f"null scale {_g(scale)}"
+    notes = []
+    baseline_floor = (report.get("baseline") or {}).get("floor")
+    if _same(scale, baseline_floor) and not _same(baseline_floor, report.get("noise_floor")):
+        notes.append("the noise floor at the baseline fit")
     if lo is not None and hi != lo:
-        text += f" (any of {_g(lo)}–{'∞' if hi is None else _g(hi)} gives these decisions)"
-    return text
+        notes.append(f"any of {_g(lo)}–{'∞' if hi is None else _g(hi)} gives these decisions")
+    return f"null scale {_g(scale)}" + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def _same(a: Any, b: Any) -> bool:
+    return a is not None and b is not None and math.isclose(float(a), float(b), rel_tol=1e-9)
 
 
 def limits_scale_note(report: Mapping[str, Any]) -> str | None:
