@@ -407,7 +407,7 @@ def _diagnose_stages(
     self_gap = self_consistency_gap([run["gap"] for run in calibration], settings.rule.calibration_summary) if (
         calibration and every_run) else None  # fmt: skip
     say(
-        f"      gap {tested:.4g}, noise floor {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
+        f"      gap {tested:.4g}, noise floor at the baseline fit {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
         + ("misspecified" if verdict["gap_test"] else "within what a correct model leaves")
     )
     if verdict["evidence"] == ["effect"]:
