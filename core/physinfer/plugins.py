@@ -6,6 +6,12 @@ recorded with its name and error and left out; the others still load.
 :func:`check_references` imports every ``"module:attr"`` the plugins registered, so
 ``physinfer plugins`` shows a lazily named implementation that fails to import.
 ``PHYSINFER_DISABLED_PLUGINS`` (comma-separated entry-point names) blocks plugins.
+
+The host's plugins (those of the ``physinfer`` distribution: ``builtins``, ``flag``,
+``hanging_cloth``) register first, then the others in entry-point name order; a name already
+taken is refused (:class:`~physinfer.registry.Registry`), so no third-party plugin can replace
+a built-in phenomenon, optimizer, embedder, effect or command, whatever its name sorts as or
+its hooks' ``tryfirst``.
 """
 
 from __future__ import annotations
@@ -24,6 +30,8 @@ from physinfer import hooks
 from physinfer.registry import KINDS, Registry
 
 ENTRY_POINT_GROUP = "physinfer"
+#: The distribution whose plugins are the host's own, registered before any other.
+HOST_DISTRIBUTION = "physinfer"
 DISABLED_ENV = "PHYSINFER_DISABLED_PLUGINS"
 REGISTER_HOOKS = (
     "physinfer_register_phenomena",
@@ -47,6 +55,8 @@ class PluginInfo:
         traceback: Full traceback text of that failure, for ``--verbose`` listings.
         unresolved: ``"kind name"`` -> ``"ExcType: message"`` for each registered
             implementation that fails to import (filled by :func:`check_references`).
+        refused: One line per name it registered that was refused because another plugin
+            (or physinfer itself) has it; the plugin's other names work.
     """
 
     name: str
@@ -56,6 +66,7 @@ class PluginInfo:
     error: str | None = None
     traceback: str | None = field(default=None, repr=False)
     unresolved: dict[str, str] = field(default_factory=dict)
+    refused: list[str] = field(default_factory=list)
 
 
 def disabled_plugins() -> set[str]:
@@ -170,7 +181,8 @@ def load_registry(
     """Call every registration hook, plugin by plugin, into a new :class:`Registry`.
 
     A plugin whose hook raises is marked with its error and what it registered before
-    failing is kept out of the way of nothing else.
+    failing is kept out of the way of nothing else. The host's plugins are called first
+    (:data:`HOST_DISTRIBUTION`), so a name a third party also registers stays the host's.
     """
     if pm is None:
         pm, infos = get_plugin_manager(
@@ -178,9 +190,15 @@ def load_registry(
         )
     infos = infos if infos is not None else {}
     registry = Registry()
+
+    def rank(plugin: str) -> int:
+        return 0 if infos.get(plugin) and infos[plugin].distribution == HOST_DISTRIBUTION else 1
+
     for hook_name in REGISTER_HOOKS:
         caller = getattr(pm.hook, hook_name)
-        for impl in caller.get_hookimpls():
+        impls = caller.get_hookimpls()
+        order = sorted(range(len(impls)), key=lambda i: (rank(impls[i].plugin_name), i))
+        for impl in (impls[i] for i in order):
             plugin = impl.plugin_name
             if infos.get(plugin) is not None and infos[plugin].error:
                 continue
@@ -191,4 +209,6 @@ def load_registry(
                 info.error = f"{type(exc).__name__} in {hook_name}: {exc}"
                 info.traceback = traceback.format_exc()
     registry.errors.update({name: info.error for name, info in infos.items() if info.error})
+    for plugin, lines in registry.refused.items():
+        infos.setdefault(plugin, PluginInfo(name=plugin)).refused = lines
     return registry, infos

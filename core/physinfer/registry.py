@@ -1,7 +1,11 @@
 """The registry that plugins fill through hooks, with lazy ``"module:attr"`` references.
 
 Entries remember which plugin added them, so ``physinfer plugins`` can show who
-provides what, and resolve their implementation only when first used.
+provides what, and resolve their implementation only when first used. A name is registered
+once: a plugin that adds a name already taken (by the host's plugins, which register first,
+or by another plugin before it), or a command named like one of physinfer's own
+(:data:`HOST_COMMANDS`), has that one entry refused and listed in :attr:`Registry.refused`;
+the first holder keeps working and the rest of the plugin loads.
 """
 
 from __future__ import annotations
@@ -13,6 +17,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from physinfer.errors import PhysinferError, UserInputError
+
+#: The commands physinfer itself defines (``physinfer.cli.app``, in ``--help``'s order): no
+#: plugin may register one of these names or a subcommand under it.
+HOST_COMMANDS = ("plugins", "simulate", "refine")
 
 KINDS = ("phenomena", "optimizers", "embedders", "effects", "commands")
 #: How one entry of each kind is named in messages.
@@ -95,24 +103,35 @@ class Registry:
     def __init__(self) -> None:
         self.entries: dict[str, dict[str, Entry]] = {kind: {} for kind in KINDS}
         self.errors: dict[str, str] = {}
+        #: Plugin name -> one line per name it registered that was refused (already taken).
+        self.refused: dict[str, list[str]] = {}
         self._plugin = ""
 
     def scoped(self, plugin: str) -> Registry:
         """A view whose ``add_*`` calls are attributed to ``plugin``."""
         view = object.__new__(Registry)
-        view.entries, view.errors, view._plugin = self.entries, self.errors, plugin
+        view.entries, view.errors, view.refused = self.entries, self.errors, self.refused
+        view._plugin = plugin
         return view
 
     def _add(self, kind: str, name: str, factory: Any, description: str, **extra: Any) -> None:
         existing = self.entries[kind].get(name)
-        if existing is not None:
-            raise ValueError(
-                f"{kind[:-1] if kind != 'phenomena' else 'phenomenon'} {name!r} registered twice "
-                f"(by {existing.plugin!r} and {self._plugin!r})"
-            )
+        why = None
+        if kind == "commands" and name.partition(" ")[0] in HOST_COMMANDS:
+            why = "physinfer's own command has that name"
+        elif existing is not None:
+            why = f"plugin {existing.plugin!r} registered it first"
+        if why is not None:  # the first holder keeps the name; this plugin's other names load
+            self.refuse(self._plugin, f"{KIND_LABELS[kind]} {name!r}", why)
+            return
         self.entries[kind][name] = Entry(
             name, factory, description, self._plugin, dict(extra), kind
         )
+
+    def refuse(self, plugin: str, what: str, why: str) -> None:
+        """Record that ``plugin``'s ``what`` (``"command 'simulate'"``) was refused, and why."""
+        line = f"{what} refused: {why} (rename it in this plugin)"
+        self.refused.setdefault(plugin, []).append(line)
 
     def add_phenomenon(
         self, name: str, factory: str | Callable[[], Any], description: str = ""

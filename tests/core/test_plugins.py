@@ -62,11 +62,14 @@ def test_fresh_manager_each_call():
     assert pm1 is not pm2
 
 
-def test_duplicate_registration_is_an_error():
+def test_duplicate_registration_is_refused_by_name():
     class Dup:
         @hookimpl
         def physinfer_register_optimizers(self, registry):
             registry.add_optimizer("ax", "x:y")
 
-    _, infos = load_registry(extra_plugins={"dup": Dup()})
-    assert "registered twice" in infos["dup"].error
+    registry, infos = load_registry(extra_plugins={"dup": Dup()})
+    assert infos["dup"].refused == [
+        "optimizer 'ax' refused: plugin 'builtins' registered it first (rename it in this plugin)"
+    ]
+    assert registry.entries["optimizers"]["ax"].plugin == "builtins"

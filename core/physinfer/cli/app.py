@@ -61,6 +61,8 @@ from physinfer.cli.refine_cmd import (
 )
 from physinfer.cli.simulate_cmd import simulate_cmd
 from physinfer.console import err_console
+from physinfer.plugins import PluginInfo
+from physinfer.registry import Entry, Registry
 
 __all__ = [
     "CLI_ONLY",
@@ -104,7 +106,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-# The host's own commands, in the order `physinfer --help` lists them (plugins' come after).
+# The host's own commands, in the order `physinfer --help` lists them (plugins' come after);
+# physinfer.registry.HOST_COMMANDS names them, so no plugin can register one.
 app.command("plugins")(plugins_cmd)
 app.command("simulate")(simulate_cmd)
 app.command("refine")(refine_cmd)
@@ -119,15 +122,22 @@ def _mount_plugin_commands() -> None:
     A name with a space, ``"evaluate triplets"``, is a subcommand of the group named by its
     first word; the group is created when no plugin registers it, so several plugins can
     contribute subcommands to one group (``physinfer evaluate triplets|wind|bouman``).
+    A subcommand the group has already (``dataset generate`` of the built-in ``dataset``
+    group) or one under a command that is not a group is refused, listed for its plugin by
+    ``physinfer plugins``, and the command that was there keeps working.
     """
     registry, infos = registry_and_infos()
     groups: dict[str, typer.Typer] = {}
     for name, entry in sorted(registry.entries["commands"].items()):
+        parent_name, _, child = name.partition(" ")
+        why = _subcommand_clash(parent_name, child, groups, registry)
+        if why is not None:
+            _refuse_command(registry, infos, entry, why)
+            continue
         try:
             obj = entry.load()
         except Exception as exc:  # the command says why when run; --help and the rest work
             obj = _broken_command(exc)
-        parent_name, _, child = name.partition(" ")
         parent = app
         if child:
             parent = groups.get(parent_name) or _new_group(parent_name, groups)
@@ -142,6 +152,39 @@ def _mount_plugin_commands() -> None:
                 name, help=entry.description or None, context_settings=settings
             )
             command(handle_errors()(obj))
+
+
+def _subcommand_clash(
+    parent_name: str, child: str, groups: dict[str, typer.Typer], registry: Registry
+) -> str | None:
+    """Why the subcommand ``parent_name child`` cannot be mounted, or ``None``."""
+    if not child:
+        return None
+    group = groups.get(parent_name)
+    if group is None:
+        parent = registry.entries["commands"].get(parent_name)
+        if parent is not None:  # registered, yet not mounted as a group: a plain command
+            return f"{parent_name!r} is a command of plugin {parent.plugin!r}, not a group"
+        return None
+    taken = {
+        info.name or typer.main.get_command_name(info.callback.__name__)
+        for info in group.registered_commands
+        if info.callback is not None
+    }
+    taken |= {info.name for info in group.registered_groups if info.name}
+    if child in taken:
+        return f"the group {parent_name!r} has that command already"
+    return None
+
+
+def _refuse_command(
+    registry: Registry, infos: dict[str, PluginInfo], entry: Entry, why: str
+) -> None:
+    """Leave ``entry`` out of the CLI and list it as refused for its plugin."""
+    registry.refuse(entry.plugin, f"command {entry.name!r}", why)
+    registry.entries["commands"].pop(entry.name, None)
+    info = infos.setdefault(entry.plugin, PluginInfo(name=entry.plugin))
+    info.refused = registry.refused[entry.plugin]
 
 
 def _broken_command(error: Exception) -> Callable[..., None]:

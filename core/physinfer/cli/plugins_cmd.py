@@ -1,5 +1,5 @@
-"""``physinfer plugins``: the installed plugins, what each provides, and the broken ones with
-their error."""
+"""``physinfer plugins``: the installed plugins, what each provides, the broken ones with
+their error, and the names each was refused because another plugin (or physinfer) has them."""
 
 from __future__ import annotations
 
@@ -23,7 +23,8 @@ def plugins_cmd(
 ) -> None:
     """List installed plugins and what each provides; broken plugins with their error.
 
-    Imports every implementation the plugins name, so one that fails to import shows here.
+    Imports every implementation the plugins name, so one that fails to import shows here;
+    a name a plugin registered that physinfer or another plugin has already is listed as refused.
     """
     from physinfer.plugins import check_references
 
@@ -45,11 +46,12 @@ def plugins_cmd(
                 "commands": provided["commands"],
                 "error": info.error,
                 "unresolved": info.unresolved,
+                "refused": info.refused,
             }
         )
     for r in rows:  # in full on stderr (the table's cells may be cut to the terminal's width)
-        if r["error"] or r["unresolved"]:
-            status = _plugin_status(r["error"], r["unresolved"])
+        if r["error"] or r["unresolved"] or r["refused"]:
+            status = _plugin_status(r["error"], r["unresolved"], r["refused"])
             err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
     if as_json:
         emit_json(
@@ -81,7 +83,7 @@ def plugins_cmd(
             ", ".join(r["optimizers"]),
             ", ".join(r["embedders"]),
             ", ".join(r["effects"]),
-            _plugin_status(r["error"], r["unresolved"]),
+            _plugin_status(r["error"], r["unresolved"], r["refused"]),
         )
     Console().print(table)
     if verbose:
@@ -105,7 +107,10 @@ def _scene_settings(registry: Any) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
-def _plugin_status(error: str | None, unresolved: dict[str, str]) -> str:
+def _plugin_status(
+    error: str | None, unresolved: dict[str, str], refused: list[str] | None = None
+) -> str:
     """The status cell of ``physinfer plugins``: ``ok``, or what failed, in red."""
     problems = ([error] if error else []) + [f"{what}: {why}" for what, why in unresolved.items()]
+    problems += refused or []
     return "[red]" + escape("; ".join(problems)) + "[/]" if problems else "ok"
