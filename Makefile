@@ -7,13 +7,22 @@ BIN := $(VENV)/bin
 # install from replacing it with a CUDA build.
 TORCH_SPEC ?= torch==2.13.0
 CONSTRAINTS := $(VENV)/constraints.txt
-EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+# libgl1 and libglx0: pyglet (imported by pyrender) loads libGL.so.1 even when headless.
+EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libglx0
+# pyrender 0.1.45 pins PyOpenGL==3.1.0, which fails on Python 3.12+ ("No array-type handler
+# for type _ctypes.type"; fixed in 3.1.7). pip cannot resolve a newer one beside the pin, so
+# it is installed as a step of its own, last (pip warns about pyrender's pin; it renders).
+PYOPENGL_SPEC ?= PyOpenGL>=3.1.7
 # Headless Chromium and its WebDriver: the tests open every run's report.html in a real browser.
 BROWSER_PACKAGES := chromium chromium-driver
 PIP := $(BIN)/pip --disable-pip-version-check
 # pip warns once per package about index folders this machine lacks; hide only that line.
 QUIET_PIP := 2> >(grep -v "is ignored: it is neither" >&2)
+# ... and, installing PyOpenGL, the three lines saying pyrender pins 3.1.0 (known; see above).
+QUIET_PYOPENGL := 2> >(grep -v -e "is ignored: it is neither" -e "dependency resolver" -e "pyrender" >&2)
 export PYOPENGL_PLATFORM ?= egl
+# pyglet (imported by pyrender) looks for an X display unless told it is headless.
+export PYGLET_HEADLESS ?= 1
 
 .PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes clean
 
@@ -26,7 +35,8 @@ $(VENV)/.installed: pyproject.toml examples/pendulum/pyproject.toml | $(BIN)/pyt
 	$(BIN)/python -c "import torch; print('torch==' + torch.__version__)" > $(CONSTRAINTS)
 	$(PIP) install -q -c $(CONSTRAINTS) -e ".[dev]" $(QUIET_PIP)
 	$(PIP) install -q -c $(CONSTRAINTS) -e examples/pendulum $(QUIET_PIP)
-	$(BIN)/python -c "import physinfer, physinfer_flag, pendulum_example" 
+	$(PIP) install -q -c $(CONSTRAINTS) "$(PYOPENGL_SPEC)" $(QUIET_PYOPENGL)
+	$(BIN)/python -c "import physinfer, physinfer_flag, pendulum_example, pyrender"
 	touch $@
 
 install: $(VENV)/.installed
@@ -34,7 +44,8 @@ install: $(VENV)/.installed
 # Headless OpenGL through EGL on Mesa's CPU driver (llvmpipe), and headless Chromium; each
 # installed only when missing.
 system-deps:
-	@if ! ldconfig -p | grep -q "libEGL_mesa.so" || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
+	@if ! ldconfig -p | grep -q "libEGL_mesa.so" || ! ldconfig -p | grep -q "libGL.so.1" \
+		|| ! ldconfig -p | grep -q "libGLX.so.0" || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
 		echo "installing $(EGL_PACKAGES) (headless EGL)"; \
 		if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; \
 		else sudo apt-get update -qq && sudo apt-get install -y -qq $(EGL_PACKAGES) > /dev/null; fi; \

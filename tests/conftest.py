@@ -3,6 +3,7 @@
 import os
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+os.environ.setdefault("PYGLET_HEADLESS", "1")  # pyrender imports pyglet: no X display
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 

@@ -2,7 +2,8 @@
 
 pyrender picks its OpenGL platform when first imported, from ``PYOPENGL_PLATFORM``:
 :func:`use_headless_gl` sets it to ``egl`` (Mesa's llvmpipe on CPU machines, NVIDIA's
-EGL on GPU machines) unless the user chose another. Creating an EGL context costs about
+EGL on GPU machines) unless the user chose another, and ``PYGLET_HEADLESS=1`` (pyrender
+imports pyglet, which otherwise looks for an X display). Creating an EGL context costs about
 half a second, so :class:`OffscreenContext` keeps one per renderer and reuses it.
 """
 
@@ -19,8 +20,14 @@ from physinfer.render_replay import program_cache, replay_frames
 
 
 def use_headless_gl() -> None:
-    """Select EGL for PyOpenGL unless ``PYOPENGL_PLATFORM`` is already set."""
+    """Select EGL for PyOpenGL and a headless pyglet, unless the user chose otherwise.
+
+    Sets ``PYOPENGL_PLATFORM=egl`` and ``PYGLET_HEADLESS=1`` where they are not set: pyrender
+    imports pyglet, which without it wants an X display, so ``import pyrender`` fails on a
+    machine without one. Call before pyrender is first imported.
+    """
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    os.environ.setdefault("PYGLET_HEADLESS", "1")
 
 
 _Z_UP = np.array([0.0, 0.0, 1.0])
@@ -196,7 +203,8 @@ class OffscreenContext:
 
                 raise PhysinferError(
                     f"cannot create a headless OpenGL context ({type(exc).__name__}: {exc}). "
-                    "Install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri) "
+                    "Install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri "
+                    "libgl1 libglx0) "
                     "and keep PYOPENGL_PLATFORM=egl."
                 ) from None
 

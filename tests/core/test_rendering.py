@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from physinfer.rendering import OffscreenContext, look_at, spherical_camera
+from physinfer.rendering import OffscreenContext, look_at, spherical_camera, use_headless_gl
 
 
 def triangle_scene(offset: float = 0.0) -> tuple[object, object]:
@@ -24,6 +24,20 @@ def triangle_scene(offset: float = 0.0) -> tuple[object, object]:
     scene.add(pyrender.PerspectiveCamera(yfov=1.0), pose=look_at(np.array([0.0, 0.0, 2.0]), np.zeros(3),
                                                                  up=np.array([0.0, 1.0, 0.0])))
     return scene, primitive
+
+
+def test_use_headless_gl_selects_egl_and_a_headless_pyglet(monkeypatch: pytest.MonkeyPatch) -> None:
+    """pyrender imports pyglet, which wants an X display unless told it is headless (issue 45)."""
+    monkeypatch.delenv("PYOPENGL_PLATFORM", raising=False)
+    monkeypatch.delenv("PYGLET_HEADLESS", raising=False)
+    use_headless_gl()
+    import os
+
+    assert os.environ["PYOPENGL_PLATFORM"] == "egl" and os.environ["PYGLET_HEADLESS"] == "1"
+    monkeypatch.setenv("PYOPENGL_PLATFORM", "osmesa")
+    monkeypatch.setenv("PYGLET_HEADLESS", "0")
+    use_headless_gl()  # what the user chose stays
+    assert os.environ["PYOPENGL_PLATFORM"] == "osmesa" and os.environ["PYGLET_HEADLESS"] == "0"
 
 
 def test_look_at_points_the_camera_minus_z_axis_at_the_target() -> None:
