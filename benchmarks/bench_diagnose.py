@@ -16,7 +16,7 @@ finished stages continues from them.
 
 Example (the numbers in docs/benchmarks.md)::
 
-    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_diagnose.py --plugin pendulum \\
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_diagnose.py --plugin pendulum_lab \\
         --seeds 5 --steps 16 --optimizer ax --render-size 48 --out /tmp/bench_diagnose
 
     # the flag table in two processes, then the summary of both
@@ -620,7 +620,7 @@ def plugin_name(registry: Any, plugin: str) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--plugin", default="pendulum")
+    parser.add_argument("--plugin", default="pendulum_lab")
     parser.add_argument("--effects", nargs="*", default=None, help="hidden effects (default: all of the plugin's)")
     parser.add_argument("--candidates", nargs="*", default=None, metavar="EFFECT",
                         help="effects each diagnosis tries (default: all of the plugin's)")

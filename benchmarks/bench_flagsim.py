@@ -6,7 +6,7 @@ count into fresh temporary directories through the real engine
 renderer built inside each worker, shards written and checksummed), times it end to
 end, and checks that every worker count produced identical data (and, if not, by how
 much the pixels differ: a renderer that is not bit-deterministic shows up here). Works for any
-installed phenomenon: ``--plugin flag`` (the default), ``--plugin pendulum``, ...
+installed phenomenon: ``--plugin flag`` (the default), ``--plugin pendulum_lab``, ...
 
 Usage::
 

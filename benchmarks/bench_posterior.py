@@ -1,7 +1,7 @@
 """Amortized posterior benchmark: generate (or resume) a dataset, train an estimator with sbi,
 and check its calibration on the held-out split; prints one JSON object.
 
-    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior.py --plugin pendulum \
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior.py --plugin pendulum_lab \
         --sims 600,0,150 --frames 100 --size 64 --out runs/bench_posterior_pendulum
     # the flag's shipped estimator (make posterior made the data): calibration only
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior.py --plugin flag \
@@ -65,7 +65,7 @@ def infer_seconds(registry: object, estimator_path: Path, data: Path, plugin: st
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--plugin", default="pendulum")
+    parser.add_argument("--plugin", default="pendulum_lab")
     parser.add_argument("--data", default=None, help="existing dataset (default: OUT/data, generated)")
     parser.add_argument("--sims", default="600,0,150", help="TRAIN,VAL,TEST simulations to generate")
     parser.add_argument("--frames", type=int, default=100)

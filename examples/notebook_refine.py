@@ -26,15 +26,15 @@ args.out.mkdir(parents=True, exist_ok=True)
 
 # %%
 truth = {"length": 1.3, "damping": 0.2, "amplitude": 40.0}
-target = pi.simulate("pendulum", set=truth, seed=7, out=args.out / "pendulum_target.mp4")
+target = pi.simulate("pendulum_lab", set=truth, seed=7, out=args.out / "pendulum_target.mp4")
 target.plot(n=5).savefig(args.out / "pendulum_frames.png")
 
 pendulum = pi.refine(
-    "pendulum",
+    "pendulum_lab",
     target=args.out / "pendulum_target.mp4",
     truth=truth,
     steps=args.steps or 20,
-    out=args.out / "pendulum",
+    out=args.out / "pendulum_lab",
     overwrite=True,
 )
 for name, value in pendulum.best_params.items():

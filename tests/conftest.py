@@ -51,6 +51,6 @@ def _run_in_process(*args: str, cwd: Path | None = None) -> Ran:
 @pytest.fixture(scope="session")
 def physinfer_cli():
     """``physinfer ARGS...`` run in this process (no interpreter start-up, numba and torch already
-    loaded): ``physinfer_cli("refine", "--plugin", "pendulum", ..., cwd=None) -> Ran``. The
+    loaded): ``physinfer_cli("refine", "--plugin", "pendulum_lab", ..., cwd=None) -> Ran``. The
     console script's own start-up is tested with subprocesses in tests/core/test_cli.py."""
     return _run_in_process

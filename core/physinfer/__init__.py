@@ -4,7 +4,7 @@ The commands as functions (:mod:`physinfer.api`, re-exported here)::
 
     import physinfer
 
-    result = physinfer.refine("pendulum", steps=20, out="runs/pendulum")
+    result = physinfer.refine("pendulum_lab", steps=20, out="runs/pendulum")
     result.best_params, result.posterior, result.to_dict(), result.plot()
 
 and what a plugin is written against: the roles (:class:`Simulator`, :class:`Renderer`,

@@ -43,9 +43,9 @@ def test_help_imports_no_heavy_library():
 def test_plugins_json_lists_example_and_optimizers():
     data = json_out(run_cli("plugins", "--json"))
     by_name = {p["name"]: p for p in data["plugins"]}
-    assert by_name["pendulum"]["phenomena"] == ["pendulum"]
-    assert by_name["pendulum"]["effects"] == ["quadratic_drag"]
-    assert by_name["pendulum"]["distribution"] == "physinfer-pendulum-example"
+    assert by_name["pendulum_lab"]["phenomena"] == ["pendulum_lab"]
+    assert by_name["pendulum_lab"]["effects"] == ["quadratic_drag"]
+    assert by_name["pendulum_lab"]["distribution"] == "physinfer-pendulum-example"
     assert set(by_name["builtins"]["optimizers"]) == {"ax", "random", "cma"}
     for key in ("name", "distribution", "version", "phenomena", "optimizers", "embedders", "effects", "error"):
         assert key in by_name["builtins"]
@@ -54,7 +54,7 @@ def test_plugins_json_lists_example_and_optimizers():
 def test_simulate_writes_video_and_trajectory(tmp_path):
     out, traj = tmp_path / "p.mp4", tmp_path / "p.npz"
     data = json_out(
-        run_cli("simulate", "--plugin", "pendulum", "--set", "length=0.8", "--out", str(out),
+        run_cli("simulate", "--plugin", "pendulum_lab", "--set", "length=0.8", "--out", str(out),
                 "--trajectory-out", str(traj), "--json")
     )
     assert data["params"]["length"] == 0.8 and out.stat().st_size > 1000
@@ -66,13 +66,13 @@ def test_simulate_writes_video_and_trajectory(tmp_path):
     "args,message",
     [
         (["refine", "--plugin", "nope"], "unknown plugin/phenomenon 'nope'; installed:"),
-        (["simulate", "--plugin", "pendulum", "--set", "length=9", "--out", "x.mp4"],
+        (["simulate", "--plugin", "pendulum_lab", "--set", "length=9", "--out", "x.mp4"],
          "length=9 is outside its bounds [0.4, 1.6] m"),
-        (["simulate", "--plugin", "pendulum", "--set", "lenght=1", "--out", "x.mp4"],
+        (["simulate", "--plugin", "pendulum_lab", "--set", "lenght=1", "--out", "x.mp4"],
          "unknown parameter 'lenght'; known parameters: length, damping, amplitude"),
-        (["refine", "--plugin", "pendulum", "--target", "missing.mp4"], "does not exist"),
-        (["refine", "--plugin", "pendulum", "--optimizer", "sgd"], "unknown optimizer 'sgd'; installed: ax, cma, random"),
-        (["simulate", "--plugin", "pendulum", "--effect", "gusts", "--out", "x.mp4"], "unknown effect 'gusts'"),
+        (["refine", "--plugin", "pendulum_lab", "--target", "missing.mp4"], "does not exist"),
+        (["refine", "--plugin", "pendulum_lab", "--optimizer", "sgd"], "unknown optimizer 'sgd'; installed: ax, cma, random"),
+        (["simulate", "--plugin", "pendulum_lab", "--effect", "gusts", "--out", "x.mp4"], "unknown effect 'gusts'"),
     ],
 )
 def test_bad_input_gives_one_clear_line(tmp_path, args, message):
@@ -86,12 +86,12 @@ def test_bad_input_gives_one_clear_line(tmp_path, args, message):
 def test_unreadable_and_too_short_targets(tmp_path):
     bad = tmp_path / "bad.mp4"
     bad.write_bytes(b"not a video at all")
-    proc = run_cli("refine", "--plugin", "pendulum", "--target", str(bad), "--out", str(tmp_path / "r"), check=False)
+    proc = run_cli("refine", "--plugin", "pendulum_lab", "--target", str(bad), "--out", str(tmp_path / "r"), check=False)
     assert proc.returncode == 2 and "cannot decode the video" in proc.stderr
     short = tmp_path / "short.mp4"
     noise = np.random.default_rng(0).integers(0, 255, (10, 64, 64, 3), dtype=np.uint8)  # moving, too short
     write_video(short, Clip(noise, 25.0))
-    proc = run_cli("refine", "--plugin", "pendulum", "--target", str(short), "--out", str(tmp_path / "r"), check=False)
+    proc = run_cli("refine", "--plugin", "pendulum_lab", "--target", str(short), "--out", str(tmp_path / "r"), check=False)
     assert proc.returncode == 2
     assert "too short" in proc.stderr and "needs at least 100 frames" in " ".join(proc.stderr.split())
     assert not (tmp_path / "r").exists(), "a refused target must leave no run directory"
@@ -99,7 +99,7 @@ def test_unreadable_and_too_short_targets(tmp_path):
 
 def test_unknown_render_setting_fails_before_simulating(tmp_path):
     proc = subprocess.run(
-        [str(BIN), "simulate", "--plugin", "pendulum", "--render-set", "sise=64", "--out", str(tmp_path / "p.mp4"), "--json"],
+        [str(BIN), "simulate", "--plugin", "pendulum_lab", "--render-set", "sise=64", "--out", str(tmp_path / "p.mp4"), "--json"],
         capture_output=True, text=True, timeout=300,
     )
     assert proc.returncode == 2
@@ -137,7 +137,7 @@ def test_an_internal_error_is_one_line_with_a_saved_traceback_outside_out(tmp_pa
     out = tmp_path / "clip.mp4"
     for as_json in (False, True):
         proc = subprocess.run(
-            [str(BIN), "simulate", "--plugin", "pendulum", "--out", str(out), *(["--json"] if as_json else [])],
+            [str(BIN), "simulate", "--plugin", "pendulum_lab", "--out", str(out), *(["--json"] if as_json else [])],
             capture_output=True, text=True, timeout=300, env=env,
         )  # fmt: skip
         assert proc.returncode == 1, proc.stderr

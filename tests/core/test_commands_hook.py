@@ -27,7 +27,7 @@ def test_embedder_and_effect_hooks_via_registry():
 
         @hookimpl
         def physinfer_register_effects(self, registry):
-            registry.add_effect("wobble", "pendulum_example.physics:QuadraticDrag", phenomenon="pendulum")
+            registry.add_effect("wobble", "pendulum_example.physics:QuadraticDrag", phenomenon="pendulum_lab")
 
         @hookimpl
         def physinfer_register_optimizers(self, registry):
@@ -35,7 +35,7 @@ def test_embedder_and_effect_hooks_via_registry():
 
     registry, _ = load_registry(extra_plugins={"extra": Extra()})
     assert registry.embedder("copy_grid").n_frames > 0
-    assert "wobble" in registry.effects_of("pendulum")
+    assert "wobble" in registry.effects_of("pendulum_lab")
     assert registry.optimizer("rnd2", dim=2).ask(1)[0].x.shape == (2,)
 
 

@@ -531,7 +531,7 @@ def test_a_damaged_or_cut_manifest_is_refused_and_generate_rewrites_it(tmp_path,
     from physinfer.datasets.loader import ClipDataset
     from physinfer.errors import UserInputError
 
-    args = ["dataset", "generate", "--plugin", "pendulum", "--sims", "4,0,2", "--frames", "20", "--size", "32",
+    args = ["dataset", "generate", "--plugin", "pendulum_lab", "--sims", "4,0,2", "--frames", "20", "--size", "32",
             "--workers", "0", "--out", tmp_path / "d", "--json"]  # fmt: skip
     assert physinfer_cli(*args).returncode == 0
     manifest = tmp_path / "d" / "manifest.jsonl"
@@ -550,5 +550,5 @@ def test_a_damaged_or_cut_manifest_is_refused_and_generate_rewrites_it(tmp_path,
 def test_a_binary_model_file_is_one_clear_line(tmp_path, physinfer_cli):
     model = tmp_path / "model.json"
     model.write_bytes(bytes(range(256)) * 4)
-    proc = physinfer_cli("refine", "--plugin", "pendulum", "--model", model, "--out", tmp_path / "r", "--json")
+    proc = physinfer_cli("refine", "--plugin", "pendulum_lab", "--model", model, "--out", tmp_path / "r", "--json")
     assert proc.returncode == 2 and "is not JSON" in proc.json()["error"]

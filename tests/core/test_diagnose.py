@@ -114,11 +114,11 @@ def test_calibration_runs_must_be_positive(tmp_path: Path):
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
     with pytest.raises(UserInputError, match="--calibration-runs must be at least 1"):
-        DiagnoseSettings(plugin="pendulum", out=tmp_path, calibration_runs=0).validate()
+        DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, calibration_runs=0).validate()
     with pytest.raises(UserInputError, match="--select-top must be 0 or at least 2"):
-        DiagnoseSettings(plugin="pendulum", out=tmp_path, select_top=1).validate()
+        DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, select_top=1).validate()
     with pytest.raises(UserInputError, match="--batch-size must be at least 1"):
-        DiagnoseSettings(plugin="pendulum", out=tmp_path, batch_size=0).validate()
+        DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, batch_size=0).validate()
 
 
 def test_null_scale_and_misspecification():
@@ -255,19 +255,19 @@ def test_effect_parameters_start_off():
 
 def test_model_file_round_trip_and_checks(tmp_path: Path):
     space = ParameterSpace([ParameterSpec("length", (0.4, 1.6)), ParameterSpec("drag_quadratic", (0.0, 2.0))])
-    write_model(tmp_path / "model.json", plugin="pendulum", effects=["quadratic_drag"], space=space,
+    write_model(tmp_path / "model.json", plugin="pendulum_lab", effects=["quadratic_drag"], space=space,
                 values={"length": 1.1, "drag_quadratic": 0.9}, gap=0.5)
     model = read_model(tmp_path / "model.json")
     assert model.effects == ("quadratic_drag",) and model.extra["gap"] == 0.5
     assert model.start_for(space) == {"length": 1.1, "drag_quadratic": 0.9}
-    assert model_for_refine(tmp_path / "model.json", "pendulum", []).plugin == "pendulum"
+    assert model_for_refine(tmp_path / "model.json", "pendulum_lab", []).plugin == "pendulum_lab"
     with pytest.raises(UserInputError, match="not of --plugin"):
         model_for_refine(tmp_path / "model.json", "flag", [])
     with pytest.raises(UserInputError, match="contradicts"):
-        model_for_refine(tmp_path / "model.json", "pendulum", ["other"])
+        model_for_refine(tmp_path / "model.json", "pendulum_lab", ["other"])
     with pytest.raises(UserInputError, match="do not match"):
         model.start_for(ParameterSpace([ParameterSpec("length", (0.4, 1.6))]))
-    (tmp_path / "bad.json").write_text(json.dumps({"plugin": "pendulum"}))
+    (tmp_path / "bad.json").write_text(json.dumps({"plugin": "pendulum_lab"}))
     with pytest.raises(UserInputError, match="not a physinfer model file"):
         read_model(tmp_path / "bad.json")
     with pytest.raises(UserInputError, match="no such file"):
@@ -307,7 +307,7 @@ def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
     from physinfer.video import write_video
 
     registry, _ = load_registry()
-    pipeline = build_pipeline(registry, "pendulum", effects=[effect] if effect else [], embedder="")
+    pipeline = build_pipeline(registry, "pendulum_lab", effects=[effect] if effect else [], embedder="")
     truth = {"length": 1.1, "damping": 0.05, "amplitude": 50.0}
     if effect:
         truth["drag_quadratic"] = 1.0
@@ -323,7 +323,7 @@ def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
     registry, _ = load_registry()
     kw.setdefault("workers", 1)  # tiny stages: starting workers would cost more than they save
     settings = DiagnoseSettings(
-        plugin="pendulum", out=tmp_path / f"diag-{target.stem}", target_path=target, render_set={"size": 48},
+        plugin="pendulum_lab", out=tmp_path / f"diag-{target.stem}", target_path=target, render_set={"size": 48},
         steps=steps, optimizer=optimizer, floor_samples=4, videos=False, **kw,
     )
     return run_diagnosis(registry, settings)
@@ -381,7 +381,7 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibrate_all=True)
     assert again["gap_before"] == report["gap_before"]
     model = read_model(out / "model.json")
-    assert model.plugin == "pendulum"
+    assert model.plugin == "pendulum_lab"
     # Three calibration runs (all refined: calibrate_all), each a stage with its own control; the null scale
     # uses the largest of their gaps, and the test uses the best baseline fit's gap.
     gaps = report["self_consistency_gaps"]
@@ -450,7 +450,7 @@ def test_fixed_parameters_stay_fixed_in_every_model_and_in_the_model_file(tmp_pa
     model = read_model(out / "model.json")
     assert model.values["damping"] == 0.05 and model.extra["fixed"] == {"damping": 0.05}
     registry, _ = load_registry()
-    refine(registry, plugin="pendulum", model=out / "model.json", target_path=target, steps=1, optimizer="random",
+    refine(registry, plugin="pendulum_lab", model=out / "model.json", target_path=target, steps=1, optimizer="random",
            render_set={"size": 48}, noise_samples=0, floor_samples=0, out=tmp_path / "again", progress=False)
     assert json.loads((tmp_path / "again" / "run.json").read_text())["fixed"] == {"damping": 0.05}
 
@@ -503,7 +503,7 @@ def _pendulum_under_another_name():
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()
-    pendulum = registry.phenomenon("pendulum")
+    pendulum = registry.phenomenon("pendulum_lab")
     registry.scoped("test").add_phenomenon("pendulum_alias", lambda **_: pendulum, "the pendulum, renamed")
     return registry
 
@@ -532,7 +532,7 @@ def test_a_calibration_target_is_encoded_once_and_read_back(tmp_path: Path, monk
     from physinfer.session import build_pipeline
 
     registry, _ = load_registry()
-    pipeline = build_pipeline(registry, "pendulum", embedder="")
+    pipeline = build_pipeline(registry, "pendulum_lab", embedder="")
     target = Target(None, None, {"size": 48}, "test")
     theta = {"length": 1.0, "damping": 0.1, "amplitude": 40.0}
     writes = []
@@ -554,12 +554,12 @@ def test_a_pool_starts_its_workers_with_their_model_before_the_first_round(tmp_p
     from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
-    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=2, optimizer="ax")
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, workers=2, optimizer="ax")
     with WorkerPool(settings, ["quadratic_drag"], 3, print) as pool:
         warming = pool.warm_up()
         assert len(warming) == 2
         assert [f.result(timeout=300) for f in warming] == [None, None]
-    alone = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1)
+    alone = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, workers=1)
     with WorkerPool(alone, ["quadratic_drag"], 3, print) as pool:
         assert pool.warm_up() == [] and pool.size == 1
 
@@ -575,7 +575,7 @@ def test_the_baselines_resimulations_on_workers_are_this_process_own(tmp_path: P
     from physinfer.evaluation import simulate_and_embed
     from physinfer.plugins import load_registry
 
-    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=2, optimizer="random")
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, workers=2, optimizer="random")
     base = build_base(load_registry()[0], settings)
     zeta = {**base.renderer.default_render_params, "size": 32}
     theta = base.simulator.parameter_space.from_unit(np.zeros(len(base.simulator.parameter_space)))
@@ -589,7 +589,7 @@ def test_the_baselines_resimulations_on_workers_are_this_process_own(tmp_path: P
     assert there[2] is None and here[2] is None and not said
     for a, b in zip(there[:2], here[:2], strict=True):
         assert a.dtype == b.dtype and np.array_equal(a, b)
-    with WorkerPool(DiagnoseSettings(plugin="pendulum", out=tmp_path, workers=1), [], 3, print) as pool:
+    with WorkerPool(DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, workers=1), [], 3, print) as pool:
         assert pooled_clip_embedder(pool, base, zeta, print) is None
     base.renderer.close()
 

@@ -16,11 +16,11 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 
 def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     target = tmp_path / "drag.mp4"
-    sim = _run("simulate", "--plugin", "pendulum", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.0",
+    sim = _run("simulate", "--plugin", "pendulum_lab", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.0",
                "--render-set", "size=48", "--out", str(target))
     assert sim.returncode == 0, sim.stderr
     out = tmp_path / "diag"
-    proc = _run("diagnose", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48",
+    proc = _run("diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48",
                 "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video", "--workers", "0",
                 "--out", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
@@ -36,7 +36,7 @@ def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     model["values"] = {**report["baseline"]["best_params"], "drag_quadratic": 0.7}
     (out / "model.json").write_text(json.dumps(model))
     run_dir = tmp_path / "refined"
-    proc = _run("refine", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48",
+    proc = _run("refine", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48",
                 "--model", str(out / "model.json"), "--steps", "2", "--optimizer", "random",
                 "--out", str(run_dir), "--json")
     assert proc.returncode == 0, proc.stderr
@@ -50,10 +50,10 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     makes the model misspecified and names drag; ``--require-gap-test`` (re-run on the same
     stages) names nothing."""
     target = tmp_path / "drag.mp4"
-    sim = _run("simulate", "--plugin", "pendulum", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.4",
+    sim = _run("simulate", "--plugin", "pendulum_lab", "--effect", "quadratic_drag", "--set", "drag_quadratic=1.4",
                "--set", "amplitude=50", "--render-set", "size=48", "--out", str(target))
     assert sim.returncode == 0, sim.stderr
-    args = ["diagnose", "--plugin", "pendulum", "--target", str(target), "--render-set", "size=48", "--steps", "8",
+    args = ["diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48", "--steps", "8",
             "--effect-steps", "24", "--optimizer", "cma", "--floor-samples", "4", "--calibration-runs", "1",
             "--threshold", "1000", "--no-video", "--out", str(tmp_path / "diag")]
     proc = _run(*args)
@@ -76,24 +76,24 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
 
 
 def test_refine_model_errors(tmp_path: Path):
-    proc = _run("refine", "--plugin", "pendulum", "--model", str(tmp_path / "none.json"), "--steps", "1",
+    proc = _run("refine", "--plugin", "pendulum_lab", "--model", str(tmp_path / "none.json"), "--steps", "1",
                 "--out", str(tmp_path / "r"))
     assert proc.returncode == 2 and "no such file" in proc.stderr
     bad = tmp_path / "flag_model.json"
     bad.write_text(json.dumps({"format": "physinfer-model/1", "plugin": "flag", "effects": [], "parameters": [],
                                "values": {}}))
-    proc = _run("refine", "--plugin", "pendulum", "--model", str(bad), "--steps", "1", "--out", str(tmp_path / "r"))
-    assert proc.returncode == 2 and "not of --plugin 'pendulum'" in proc.stderr
+    proc = _run("refine", "--plugin", "pendulum_lab", "--model", str(bad), "--steps", "1", "--out", str(tmp_path / "r"))
+    assert proc.returncode == 2 and "not of --plugin 'pendulum_lab'" in proc.stderr
 
 
 def test_diagnose_refuses_too_few_floor_samples(tmp_path: Path):
-    proc = _run("diagnose", "--plugin", "pendulum", "--floor-samples", "2", "--out", str(tmp_path / "d"), "--json")
+    proc = _run("diagnose", "--plugin", "pendulum_lab", "--floor-samples", "2", "--out", str(tmp_path / "d"), "--json")
     assert proc.returncode == 2
     assert "floor-samples" in json.loads(proc.stdout)["error"]
 
 
 def test_diagnose_refuses_zero_calibration_runs(tmp_path: Path):
-    proc = _run("diagnose", "--plugin", "pendulum", "--calibration-runs", "0", "--out", str(tmp_path / "d"), "--json")
+    proc = _run("diagnose", "--plugin", "pendulum_lab", "--calibration-runs", "0", "--out", str(tmp_path / "d"), "--json")
     assert proc.returncode == 2
     assert "--calibration-runs must be at least 1" in json.loads(proc.stdout)["error"]
 
@@ -103,13 +103,13 @@ def test_refine_reports_a_fit_that_ended_on_a_bound(tmp_path: Path):
     and the printed result say so (a fit stopped by its search range is not an answer)."""
     model = tmp_path / "model.json"
     model.write_text(json.dumps({
-        "format": "physinfer-model/1", "plugin": "pendulum", "effects": [],
+        "format": "physinfer-model/1", "plugin": "pendulum_lab", "effects": [],
         "parameters": [{"name": "length", "bounds": [0.4, 1.6]}, {"name": "damping", "bounds": [0.0, 0.6]},
                        {"name": "amplitude", "bounds": [10.0, 60.0]}],
         "values": {"length": 1.6, "damping": 0.2, "amplitude": 30.0},
     }))
     run_dir = tmp_path / "run"
-    proc = _run("refine", "--plugin", "pendulum", "--model", str(model), "--steps", "1", "--optimizer", "random",
+    proc = _run("refine", "--plugin", "pendulum_lab", "--model", str(model), "--steps", "1", "--optimizer", "random",
                 "--render-set", "size=48", "--noise-samples", "0", "--floor-samples", "0", "--out", str(run_dir))
     assert proc.returncode == 0, proc.stderr
     assert json.loads((run_dir / "result.json").read_text())["at_bounds"] == {"length": "upper"}

@@ -121,7 +121,7 @@ class ExtraDamping(Effect):
 
     name = "extra_damping"
     description = "a second linear damping (the base damping mimics it)"
-    phenomenon = "pendulum"
+    phenomenon = "pendulum_lab"
     parameter_space = ParameterSpace(
         [ParameterSpec("damping_extra", (0.0, 0.3), "1/s", default=0.0)]
     )
@@ -136,7 +136,7 @@ class Hum(Effect):
 
     name = "hum"
     description = "a sideways hum at a random frequency"
-    phenomenon = "pendulum"
+    phenomenon = "pendulum_lab"
     parameter_space = ParameterSpace([ParameterSpec("hum", (0.0, 0.3), "m", default=0.0)])
 
     def term(self, state, params, t):
@@ -151,7 +151,7 @@ def pendulum():
 
     registry, _ = load_registry()
     renderer = PendulumRenderer()
-    yield registry.phenomenon("pendulum"), renderer
+    yield registry.phenomenon("pendulum_lab"), renderer
     renderer.close()
 
 

@@ -67,7 +67,7 @@ class Inert(Effect):
 
     name = "inert"
     description = "a term that is always zero"
-    phenomenon = "pendulum"
+    phenomenon = "pendulum_lab"
     parameter_space = ParameterSpace([ParameterSpec("inert_strength", (0.0, 1.0), default=0.0)])
 
     def term(self, state, params, t):
@@ -94,10 +94,10 @@ def _registry():
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()
-    jittery = dataclasses.replace(registry.phenomenon("pendulum"), make_simulator=_jittery_simulator)
+    jittery = dataclasses.replace(registry.phenomenon("pendulum_lab"), make_simulator=_jittery_simulator)
     test = registry.scoped("test")
     test.add_phenomenon("pendulum_jitter", lambda **_: jittery, "the pendulum, shaken")
-    test.add_effect("inert", Inert, "pendulum", Inert.description)
+    test.add_effect("inert", Inert, "pendulum_lab", Inert.description)
     return registry
 
 
@@ -108,7 +108,7 @@ def target(tmp_path_factory) -> Path:
     from physinfer.video import write_video
 
     registry = _registry()
-    renderer = registry.phenomenon("pendulum").make_renderer()
+    renderer = registry.phenomenon("pendulum_lab").make_renderer()
     truth = {"length": 1.1, "damping": 0.05, "amplitude": 50.0, "drag_quadratic": 1.5}
     clip = renderer.render(_jittery_simulator([QuadraticDrag()]).simulate(truth, seed=99), {"size": 48})
     renderer.close()
@@ -179,7 +179,7 @@ def test_a_deterministic_phenomenon_is_never_screened(tmp_path: Path):
     from physinfer.discrepancy.screen import screen_effects
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
-    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path)
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path)
     identical = np.zeros((4, 8))
     assert screen_effects(settings, None, {}, {}, identical, {"inert": Inert()}, print) == {}
     assert not (tmp_path / "screen.json").exists()

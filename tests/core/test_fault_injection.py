@@ -246,7 +246,7 @@ def same_weights(a: Path, b: Path) -> None:
 
 def refine_command(steps: int, noise_samples: int = 0) -> Command:
     return Command(
-        ["refine", "--plugin", "pendulum", "--steps", str(steps), "--optimizer", "cma", "--seed", "5",
+        ["refine", "--plugin", "pendulum_lab", "--steps", str(steps), "--optimizer", "cma", "--seed", "5",
          "--noise-samples", str(noise_samples), "--floor-samples", "0", "--render-set", "size=32", "--out", "{out}"],
         progress=lambda out: lines(out / "trials.jsonl"),
         same=same_refinement,
@@ -256,7 +256,7 @@ def refine_command(steps: int, noise_samples: int = 0) -> Command:
 
 def diagnose_command(steps: int) -> Command:
     return Command(
-        ["diagnose", "--plugin", "pendulum", "--steps", str(steps), "--effect-steps", "2", "--optimizer", "random",
+        ["diagnose", "--plugin", "pendulum_lab", "--steps", str(steps), "--effect-steps", "2", "--optimizer", "random",
          "--no-calibrate", "--render-set", "size=48", "--no-video", "--out", "{out}"],
         progress=lambda out: sum(lines(p) for p in out.glob("*/trials.jsonl")),
         same=same_diagnosis,
@@ -265,7 +265,7 @@ def diagnose_command(steps: int) -> Command:
 
 def dataset_command(sims: str, workers: int) -> Command:
     return Command(
-        ["dataset", "generate", "--plugin", "pendulum", "--sims", sims, "--renders-per-sim", "1", "--frames", "10",
+        ["dataset", "generate", "--plugin", "pendulum_lab", "--sims", sims, "--renders-per-sim", "1", "--frames", "10",
          "--size", "32", "--sims-per-unit", "1", "--workers", str(workers), "--seed", "7", "--out", "{out}"],
         progress=lambda out: len(list((out / "units").glob("*.json"))) if (out / "units").is_dir() else 0,
         same=same_dataset,

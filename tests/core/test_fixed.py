@@ -44,8 +44,8 @@ def test_bad_fixes_are_user_errors(items, message):
 
 def test_fixed_simulator_searches_the_free_parameters_and_simulates_the_full_model():
     registry, _ = load_registry()
-    full = build_pipeline(registry, "pendulum", embedder="")
-    fixed = build_pipeline(registry, "pendulum", embedder="", fixed=["amplitude=40"])
+    full = build_pipeline(registry, "pendulum_lab", embedder="")
+    fixed = build_pipeline(registry, "pendulum_lab", embedder="", fixed=["amplitude=40"])
     assert isinstance(fixed.simulator, FixedParameters)
     assert fixed.simulator.parameter_space.names == [n for n in full.simulator.parameter_space.names if n != "amplitude"]
     free = {"length": 0.9, "damping": 0.2}
@@ -59,7 +59,7 @@ def test_fixed_simulator_searches_the_free_parameters_and_simulates_the_full_mod
 def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "3", "--optimizer", "random", "--fix", "amplitude=40",
+        [str(BIN), "refine", "--plugin", "pendulum_lab", "--steps", "3", "--optimizer", "random", "--fix", "amplitude=40",
          "--truth", "amplitude=40", "--out", str(out), "--json"],
         capture_output=True, text=True, timeout=600,
     )
@@ -70,14 +70,14 @@ def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(
     assert all(len(t.x) == 2 for t in RunDirectory(out).read_trials())
     registry, _ = load_registry()
     with pytest.raises(UserInputError, match="--fix amplitude: run 40, now 30"):
-        refine(registry, plugin="pendulum", steps=4, optimizer="random", fixed=["amplitude=30"], out=out,
+        refine(registry, plugin="pendulum_lab", steps=4, optimizer="random", fixed=["amplitude=30"], out=out,
                resume=True, progress=False)
 
 
 def test_a_bad_fix_fails_before_anything_is_written(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "3", "--fix", "lenght=1", "--out", str(out)],
+        [str(BIN), "refine", "--plugin", "pendulum_lab", "--steps", "3", "--fix", "lenght=1", "--out", str(out)],
         capture_output=True, text=True, timeout=300,
     )
     assert proc.returncode == 2
@@ -91,7 +91,7 @@ def _registry_with_a_self_fixing_pendulum():
     import dataclasses
 
     registry, _ = load_registry()
-    pendulum = registry.phenomenon("pendulum")
+    pendulum = registry.phenomenon("pendulum_lab")
 
     def make(effects=()):
         return FixedParameters(pendulum.make_simulator(effects), {"amplitude": 40.0})

@@ -14,10 +14,10 @@ from physinfer.errors import UserInputError
 
 def test_simulate_returns_a_rendered_simulation_with_the_cli_json(tmp_path, physinfer_cli):
     video = tmp_path / "a.mp4"
-    sim = pi.simulate("pendulum", set={"length": 1.2}, seed=3, out=video)
+    sim = pi.simulate("pendulum_lab", set={"length": 1.2}, seed=3, out=video)
     assert sim.params["length"] == 1.2 and sim.clip is not None and video.exists()
     cli = physinfer_cli(
-        "simulate", "--plugin", "pendulum", "--set", "length=1.2", "--seed", "3",
+        "simulate", "--plugin", "pendulum_lab", "--set", "length=1.2", "--seed", "3",
         "--out", tmp_path / "b.mp4", "--json",
     ).json()  # fmt: skip
     assert set(sim.to_dict()) == set(cli)
@@ -47,9 +47,9 @@ def test_the_commands_are_the_packages_own_names_imported_on_first_use():
 
 def test_a_misspelt_setting_names_the_closest_one():
     with pytest.raises(UserInputError, match="no setting 'batchsize'.*'batch_size'"):
-        pi.refine("pendulum", batchsize=4)
+        pi.refine("pendulum_lab", batchsize=4)
     with pytest.raises(UserInputError, match="not one string"):
-        pi.simulate("pendulum", set="length=1.2")
+        pi.simulate("pendulum_lab", set="length=1.2")
 
 
 def test_options_are_frozen_and_replaced_by_keywords():
@@ -58,20 +58,20 @@ def test_options_are_frozen_and_replaced_by_keywords():
         base.steps = 3  # type: ignore[misc]
     assert dataclasses.replace(base, batch_size=2).steps == 7
     with pytest.raises(UserInputError, match="expected RefineOptions"):
-        pi.refine("pendulum", pi.DiagnoseOptions())
+        pi.refine("pendulum_lab", pi.DiagnoseOptions())
 
 
 def test_refine_matches_the_cli_and_reports_progress(tmp_path, physinfer_cli):
     seen: list[tuple[int, int, float]] = []
     settings = dict(steps=5, floor_samples=0, noise_samples=0, truth={"length": 1.0})
     result = pi.refine(
-        "pendulum",
+        "pendulum_lab",
         pi.RefineOptions(**settings),
         out=tmp_path / "api",
         progress=lambda done, total, best: seen.append((done, total, best)),
     )
     cli = physinfer_cli(
-        "refine", "--plugin", "pendulum", "--steps", "5", "--floor-samples", "0",
+        "refine", "--plugin", "pendulum_lab", "--steps", "5", "--floor-samples", "0",
         "--noise-samples", "0", "--truth", "length=1.0", "--out", tmp_path / "cli", "--json",
     ).json()  # fmt: skip
     ours = result.to_dict()

@@ -42,7 +42,7 @@ ADD_DRAG = "belongs to the effect quadratic_drag: add --effect quadratic_drag"
 def test_an_effects_parameter_without_its_effect_names_the_effect(
     physinfer_cli, tmp_path, args, expected
 ):
-    ran = physinfer_cli(args[0], "--plugin", "pendulum", *args[1:], "--json", cwd=tmp_path)
+    ran = physinfer_cli(args[0], "--plugin", "pendulum_lab", *args[1:], "--json", cwd=tmp_path)
     assert ran.returncode == 2, ran.stderr
     assert ran.json()["error"].startswith(expected)
     assert list(tmp_path.iterdir()) == [], "refused before anything is written"
@@ -52,7 +52,7 @@ def test_an_unknown_name_that_is_no_effects_still_lists_the_known_ones(physinfer
     ran = physinfer_cli(
         "simulate",
         "--plugin",
-        "pendulum",
+        "pendulum_lab",
         "--set",
         "lenght=1",
         "--out",

@@ -73,13 +73,13 @@ def test_a_deterministic_phenomenon_sends_every_first_stage_with_the_control_and
     from physinfer.discrepancy.calibration_stage import first_calibration_jobs
     from physinfer.discrepancy.workflow import DiagnoseSettings
 
-    settings = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibration_runs=3)
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibration_runs=3)
     assert first_calibration_jobs(settings, ["drag"], 2, floor=0.0) == [(0, False), (1, False), (2, False)]
     assert first_calibration_jobs(settings, ["drag"], 2, floor=0.3) == []  # control + drag fill the round
     assert first_calibration_jobs(settings, ["drag", "yaw"], 2, floor=0.3) == [(0, False)]
-    every = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibration_runs=2, calibrate_all=True)
+    every = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibration_runs=2, calibrate_all=True)
     assert first_calibration_jobs(every, ["drag"], 2, floor=0.0) == [(0, True), (1, True)]
-    none = DiagnoseSettings(plugin="pendulum", out=Path("unused"), calibrate=False)
+    none = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibrate=False)
     assert first_calibration_jobs(none, ["drag"], 2, floor=0.0) == []
 
 
@@ -187,7 +187,7 @@ def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_th
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
     lines: list[str] = []
-    settings = DiagnoseSettings(plugin="pendulum", out=tmp_path / "w2", target_path=target, render_set={"size": 48},
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path / "w2", target_path=target, render_set={"size": 48},
                                 steps=3, optimizer="random", floor_samples=4, videos=False, limits=False, workers=2)
     report = run_diagnosis(load_registry()[0], settings, log=lines.append)
     assert report["noise_floor"] == 0

@@ -21,7 +21,7 @@ def _run(tmp_path: Path, *args: str) -> str:
 
 
 def test_the_pendulum_part_runs_and_plots(tmp_path):
-    stdout = _run(tmp_path, "--steps", "4", "--plugins", "pendulum")
+    stdout = _run(tmp_path, "--steps", "4", "--plugins", "pendulum_lab")
     assert stdout.count("pendulum ") == 3
     for name in ("pendulum_target.mp4", "pendulum_frames.png", "pendulum_refinement.png"):
         assert (tmp_path / name).stat().st_size > 1000

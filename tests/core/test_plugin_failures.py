@@ -91,8 +91,8 @@ def test_help_and_plugins_list_every_broken_plugin_by_name_with_its_error(broken
     assert "no_such_module_for_physinfer_tests" in rows["lazy"]["unresolved"]["phenomenon lazyphen"]
     assert "command lazycmd" in rows["lazy"]["unresolved"]
     # Every other plugin still loads, and its names resolve.
-    assert rows["pendulum"]["phenomena"] == ["pendulum"] and rows["pendulum"]["error"] is None
-    assert not rows["pendulum"]["unresolved"] and not rows["builtins"]["unresolved"]
+    assert rows["pendulum_lab"]["phenomena"] == ["pendulum_lab"] and rows["pendulum_lab"]["error"] is None
+    assert not rows["pendulum_lab"]["unresolved"] and not rows["builtins"]["unresolved"]
 
     # In full on stderr, one plugin a line (the table's cells are cut to the terminal's width).
     assert "Traceback" not in proc.stderr
@@ -131,7 +131,7 @@ def test_a_misspelled_hook_unregisters_only_its_plugin():
     registry, infos = load_registry(extra_plugins={"misspelled": Misspelled()})
     assert "unknown hook 'physinfer_register_optimizerz'" in infos["misspelled"].error
     assert "half" not in registry.entries["phenomena"]  # a plugin that fails to load is out whole
-    assert "pendulum" in registry.entries["phenomena"]
+    assert "pendulum_lab" in registry.entries["phenomena"]
 
 
 def test_an_unresolvable_name_fails_as_a_plugin_error_and_is_listed():

@@ -49,7 +49,7 @@ class Shadowing:
 
     @hookimpl(tryfirst=True)
     def physinfer_register_phenomena(self, registry):
-        registry.add_phenomenon("pendulum", "x:y")
+        registry.add_phenomenon("pendulum_lab", "x:y")
 
     @hookimpl(tryfirst=True)
     def physinfer_register_embedders(self, registry):
@@ -57,15 +57,15 @@ class Shadowing:
 
     @hookimpl(tryfirst=True)
     def physinfer_register_effects(self, registry):
-        registry.add_effect("quadratic_drag", "x:y", phenomenon="pendulum")
+        registry.add_effect("quadratic_drag", "x:y", phenomenon="pendulum_lab")
 
 
 def test_a_plugin_cannot_take_a_builtin_name_of_any_kind():
     registry, infos = load_registry(extra_plugins={"shadow": Shadowing()})
     assert registry.entries["optimizers"]["ax"].plugin == "builtins"
-    assert registry.entries["phenomena"]["pendulum"].plugin == "pendulum"
+    assert registry.entries["phenomena"]["pendulum_lab"].plugin == "pendulum_lab"
     assert registry.entries["embedders"]["grid_spectrum"].plugin == "builtins"
-    assert registry.entries["effects"]["quadratic_drag"].plugin == "pendulum"
+    assert registry.entries["effects"]["quadratic_drag"].plugin == "pendulum_lab"
     assert registry.entries["commands"]["diagnose"].plugin == "builtins"
     assert "simulate" not in registry.entries["commands"]
     assert "refine extra" not in registry.entries["commands"]
@@ -76,7 +76,7 @@ def test_a_plugin_cannot_take_a_builtin_name_of_any_kind():
         "command 'refine extra'",
         "command 'diagnose'",
         "optimizer 'ax'",
-        "phenomenon 'pendulum'",
+        "phenomenon 'pendulum_lab'",
         "embedder 'grid_spectrum'",
         "effect 'quadratic_drag'",
     ):

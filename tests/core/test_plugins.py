@@ -10,8 +10,8 @@ from physinfer.plugins import get_plugin_manager, load_registry
 def test_entry_points_load_builtins_and_example():
     registry, infos = load_registry()
     assert {"ax", "random", "cma"} <= set(registry.entries["optimizers"])
-    assert "pendulum" in registry.entries["phenomena"]
-    assert registry.entries["effects"]["quadratic_drag"].extra["phenomenon"] == "pendulum"
+    assert "pendulum_lab" in registry.entries["phenomena"]
+    assert registry.entries["effects"]["quadratic_drag"].extra["phenomenon"] == "pendulum_lab"
     assert infos["builtins"].distribution == "physinfer"
     assert all(info.error is None for info in infos.values())
 
@@ -19,8 +19,8 @@ def test_entry_points_load_builtins_and_example():
 def test_disabled_plugins_env(monkeypatch):
     monkeypatch.setenv("PHYSINFER_DISABLED_PLUGINS", "pendulum, cma_missing")
     registry, infos = load_registry()
-    assert "pendulum" not in registry.entries["phenomena"]
-    assert "pendulum" not in infos
+    assert "pendulum_lab" not in registry.entries["phenomena"]
+    assert "pendulum_lab" not in infos
 
 
 def test_broken_plugin_is_reported_and_others_load(monkeypatch):
@@ -36,7 +36,7 @@ def test_broken_plugin_is_reported_and_others_load(monkeypatch):
     registry, infos = load_registry()
     assert infos["broken"].error.startswith("ModuleNotFoundError")
     assert "no_such_module_xyz" in infos["broken"].error
-    assert "pendulum" in registry.entries["phenomena"]
+    assert "pendulum_lab" in registry.entries["phenomena"]
 
 
 def test_plugin_whose_hook_raises_is_reported():
@@ -47,7 +47,7 @@ def test_plugin_whose_hook_raises_is_reported():
 
     registry, infos = load_registry(extra_plugins={"bad": Bad()})
     assert "boom" in infos["bad"].error
-    assert "pendulum" in registry.entries["phenomena"]
+    assert "pendulum_lab" in registry.entries["phenomena"]
 
 
 def test_unknown_plugin_lists_installed():

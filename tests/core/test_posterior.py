@@ -274,7 +274,7 @@ def pendulum_set(tmp_path_factory, physinfer_cli) -> Path:
     """A small generated pendulum dataset: 2-s clips, 48 px, 60 training and 20 test simulations."""
     root = tmp_path_factory.mktemp("posterior") / "pendulum-set"
     proc = physinfer_cli(
-        "dataset", "generate", "--plugin", "pendulum", "--sims", "60,0,20", "--renders-per-sim", "1",
+        "dataset", "generate", "--plugin", "pendulum_lab", "--sims", "60,0,20", "--renders-per-sim", "1",
         "--frames", "50", "--size", "48", "--workers", "0", "--seed", "5", "--out", str(root), "--json",
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -285,7 +285,7 @@ def pendulum_set(tmp_path_factory, physinfer_cli) -> Path:
 def pendulum_estimator(pendulum_set, physinfer_cli) -> tuple[Path, dict]:
     out = pendulum_set.parent / "pendulum.safetensors"
     proc = physinfer_cli(
-        "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set), "--out", str(out),
+        "posterior", "train", "--plugin", "pendulum_lab", "--data", str(pendulum_set), "--out", str(out),
         "--embedder-frames", "50", "--max-epochs", "40", "--device", "cpu", "--json",
     )  # fmt: skip
     return out, proc.json()
@@ -296,7 +296,7 @@ def test_train_writes_an_estimator_and_caches_the_embeddings(
 ):
     out, summary = pendulum_estimator
     assert out.is_file() and summary["estimator"] == str(out)
-    assert summary["plugin"] == "pendulum" and summary["embedder"] == "grid_spectrum"
+    assert summary["plugin"] == "pendulum_lab" and summary["embedder"] == "grid_spectrum"
     assert summary["parameters"] == ["length", "damping", "amplitude"]
     assert summary["training"]["pairs"] == 60 and 1 <= summary["training"]["epochs"] <= 41
     cache = Path(summary["embeddings_cache"])
@@ -306,7 +306,7 @@ def test_train_writes_an_estimator_and_caches_the_embeddings(
     # a second training reuses the cached embeddings (the same file, not rewritten)
     stamp = cache.stat().st_mtime_ns
     again = physinfer_cli(
-        "posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set),
+        "posterior", "train", "--plugin", "pendulum_lab", "--data", str(pendulum_set),
         "--out", str(out.with_name("again.safetensors")), "--embedder-frames", "50", "--max-epochs", "5", "--json",
     ).json()  # fmt: skip
     assert again["embeddings_cache"] == str(cache) and cache.stat().st_mtime_ns == stamp
@@ -320,7 +320,7 @@ def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(
     proc = physinfer_cli(
         "infer",
         "--plugin",
-        "pendulum",
+        "pendulum_lab",
         "--posterior",
         str(path),
         "--samples",
@@ -350,7 +350,7 @@ def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(
     human = physinfer_cli(
         "infer",
         "--plugin",
-        "pendulum",
+        "pendulum_lab",
         "--posterior",
         str(path),
         "--samples",
@@ -367,7 +367,7 @@ def test_evaluate_calibration_reports_coverage_per_parameter(
     path, _ = pendulum_estimator
     out = tmp_path / "cal"
     proc = physinfer_cli(
-        "evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(pendulum_set),
+        "evaluate", "calibration", "--plugin", "pendulum_lab", "--posterior", str(path), "--data", str(pendulum_set),
         "--samples", "200", "--out", str(out), "--json",
     )  # fmt: skip
     report = proc.json()
@@ -388,7 +388,7 @@ def test_the_api_trains_and_calibrates_with_progress_and_figures(
 
     seen: list[tuple[str, int, int]] = []
     trained = pi.train_posterior(
-        "pendulum", data=pendulum_set, out=tmp_path / "api.safetensors", embedder_frames=50,
+        "pendulum_lab", data=pendulum_set, out=tmp_path / "api.safetensors", embedder_frames=50,
         max_epochs=10, device="cpu", progress=lambda *args: seen.append(args),
     )  # fmt: skip
     assert trained.path.is_file() and trained.to_dict()["parameters"] == ["length", "damping", "amplitude"]
@@ -400,14 +400,14 @@ def test_the_api_trains_and_calibrates_with_progress_and_figures(
     path, _ = pendulum_estimator
     seen.clear()
     cal = pi.evaluate_calibration(
-        "pendulum", pi.CalibrationOptions(data=pendulum_set, posterior=path, samples=100),
+        "pendulum_lab", pi.CalibrationOptions(data=pendulum_set, posterior=path, samples=100),
         out=tmp_path / "cal", progress=lambda *args: seen.append(args),
     )  # fmt: skip
     assert cal.to_dict()["n_pairs"] == 20 and (tmp_path / "cal" / "calibration.json").is_file()
     assert {stage for stage, _, _ in seen} == {"embedding", "sampling"}
     assert len(cal.plot().axes) == 4  # three rank histograms and the coverage panel
     with pytest.raises(UserInputError, match="data: give"):
-        pi.evaluate_calibration("pendulum", posterior=path)
+        pi.evaluate_calibration("pendulum_lab", posterior=path)
 
 
 def test_bad_input_to_the_posterior_commands_is_one_clear_error(
@@ -415,19 +415,19 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(
 ):
     path, _ = pendulum_estimator
     short = tmp_path / "short.mp4"
-    assert physinfer_cli("simulate", "--plugin", "pendulum", "--out", str(short)).returncode == 0
+    assert physinfer_cli("simulate", "--plugin", "pendulum_lab", "--out", str(short)).returncode == 0
     from physinfer.video import read_video, write_video
 
     clip = read_video(short)
     write_video(short, clip.frames[:30], fps=clip.fps)  # 1.2 s of a 2-s estimator
     cases = {
-        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--target", str(short)): "lasts 1.20 s",
-        ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum, not flag",
-        ("infer", "--plugin", "pendulum", "--posterior", str(path), "--device", "tpu9"): "not a torch device",
-        ("infer", "--plugin", "pendulum"): "ships no posterior estimator",
-        ("posterior", "train", "--plugin", "flag", "--data", str(pendulum_set), "--out", str(tmp_path / "f.safetensors")): "generated for --plugin pendulum",
-        ("posterior", "train", "--plugin", "pendulum", "--data", str(pendulum_set), "--out", str(tmp_path / "f.pt")): "*.safetensors",
-        ("evaluate", "calibration", "--plugin", "pendulum", "--posterior", str(path), "--data", str(tmp_path)): "not a dataset",
+        ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--target", str(short)): "lasts 1.20 s",
+        ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum_lab, not flag",
+        ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--device", "tpu9"): "not a torch device",
+        ("infer", "--plugin", "pendulum_lab"): "ships no posterior estimator",
+        ("posterior", "train", "--plugin", "flag", "--data", str(pendulum_set), "--out", str(tmp_path / "f.safetensors")): "generated for --plugin pendulum_lab",
+        ("posterior", "train", "--plugin", "pendulum_lab", "--data", str(pendulum_set), "--out", str(tmp_path / "f.pt")): "*.safetensors",
+        ("evaluate", "calibration", "--plugin", "pendulum_lab", "--posterior", str(path), "--data", str(tmp_path)): "not a dataset",
     }  # fmt: skip
     for args, message in cases.items():
         proc = physinfer_cli(*args, "--json", cwd=tmp_path)
@@ -441,7 +441,7 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
     path, _ = pendulum_estimator
     out = tmp_path / "run"
     proc = physinfer_cli(
-        "refine", "--plugin", "pendulum", "--posterior", str(path), "--steps", "4", "--noise-samples", "0",
+        "refine", "--plugin", "pendulum_lab", "--posterior", str(path), "--steps", "4", "--noise-samples", "0",
         "--floor-samples", "0", "--out", str(out), "--json",
     )  # fmt: skip
     result = proc.json()
@@ -468,7 +468,7 @@ def test_refine_reports_the_targets_posterior_and_starts_at_its_median(
         assert first[name] == pytest.approx(m["median"], rel=1e-6)
     # a model the estimator was not trained for is refused before any simulation
     drag = physinfer_cli(
-        "refine", "--plugin", "pendulum", "--posterior", str(path), "--effect", "quadratic_drag", "--steps", "2",
+        "refine", "--plugin", "pendulum_lab", "--posterior", str(path), "--effect", "quadratic_drag", "--steps", "2",
         "--out", str(tmp_path / "drag"), "--json",
     )  # fmt: skip
     assert drag.returncode == 2 and "drag_quadratic" in drag.json()["error"]
@@ -487,15 +487,15 @@ def test_a_search_from_a_posterior_takes_the_phenomenons_shorter_default_budget(
 
     path, _ = pendulum_estimator
     registry, _ = load_registry()
-    pendulum = registry.phenomenon("pendulum")
+    pendulum = registry.phenomenon("pendulum_lab")
     short = dataclasses.replace(pendulum, default_steps_with_posterior=3)
     assert default_budget(short, None, from_posterior=True) == 3
     assert default_budget(short, None, from_posterior=False) == pendulum.default_steps
     assert default_budget(short, 5, from_posterior=True) == 5  # --steps wins
     assert default_budget(pendulum, None, from_posterior=True) == pendulum.default_steps  # not declared
     original = registry.phenomenon
-    monkeypatch.setattr(registry, "phenomenon", lambda name, *a, **k: short if name == "pendulum" else original(name, *a, **k))
-    common = {"plugin": "pendulum", "optimizer": "random", "noise_samples": 0, "floor_samples": 0, "progress": False}
+    monkeypatch.setattr(registry, "phenomenon", lambda name, *a, **k: short if name == "pendulum_lab" else original(name, *a, **k))
+    common = {"plugin": "pendulum_lab", "optimizer": "random", "noise_samples": 0, "floor_samples": 0, "progress": False}
     refine(registry, posterior=path, out=tmp_path / "from_posterior", **common)
     trials = (tmp_path / "from_posterior" / "trials.jsonl").read_text().splitlines()
     assert len(trials) == 3 and json.loads((tmp_path / "from_posterior" / "run.json").read_text())["steps"] == 3
@@ -610,12 +610,12 @@ def test_refine_from_a_model_file_with_a_posterior_reports_it_without_a_search_b
     from physinfer.plugins import load_registry
 
     path, _ = pendulum_estimator
-    space = load_registry()[0].phenomenon("pendulum").make_simulator([]).parameter_space
-    model = write_model(tmp_path / "model.json", plugin="pendulum", effects=[], space=space,
+    space = load_registry()[0].phenomenon("pendulum_lab").make_simulator([]).parameter_space
+    model = write_model(tmp_path / "model.json", plugin="pendulum_lab", effects=[], space=space,
                         values={"length": 1.2, "damping": 0.1, "amplitude": 40.0})  # fmt: skip
     out = tmp_path / "run"
     result = physinfer_cli(
-        "refine", "--plugin", "pendulum", "--model", tmp_path / "model.json", "--posterior", path,
+        "refine", "--plugin", "pendulum_lab", "--model", tmp_path / "model.json", "--posterior", path,
         "--steps", "3", "--noise-samples", "0", "--floor-samples", "0", "--out", out, "--json",
     ).json()  # fmt: skip
     assert set(result["posterior"]) == {"length", "damping", "amplitude"}

@@ -143,7 +143,7 @@ def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_pa
     out = tmp_path / "out" / "prepared.mp4"
     write_video(tmp_path / "in.mp4", Clip(still_camera.frames[:12], still_camera.fps))
     proc = subprocess.run(
-        [str(BIN), "prepare", "--plugin", "pendulum", "--target", str(tmp_path / "in.mp4"), "--out", str(out),
+        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(tmp_path / "in.mp4"), "--out", str(out),
          "--json"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
@@ -163,7 +163,7 @@ def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_pa
     for index, frame in enumerate(still_camera.frames[:3]):
         Image.fromarray(frame).save(frames / f"{index:03d}.png")
     proc = subprocess.run(
-        [str(BIN), "prepare", "--plugin", "pendulum", "--target", str(frames), "--out", str(out), "--json"],
+        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(frames), "--out", str(out), "--json"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 2 and "pass it with --fps" in json.loads(proc.stdout)["error"]
@@ -175,9 +175,9 @@ def test_the_api_prepares_without_writing_and_draws_the_overlay(still_camera, tm
     import physinfer
 
     write_video(tmp_path / "in.mp4", Clip(still_camera.frames[:12], still_camera.fps))
-    video = physinfer.prepare("pendulum", target=tmp_path / "in.mp4", size=64, no_render_estimate=True)
+    video = physinfer.prepare("pendulum_lab", target=tmp_path / "in.mp4", size=64, no_render_estimate=True)
     assert video.clip.frames.shape[1:] == (64, 64, 3) and video.paths == {}
     assert video.to_dict()["roi_source"] == "found" and video.render_estimate is None
     assert isinstance(video.plot(), Figure) and list(tmp_path.iterdir()) == [tmp_path / "in.mp4"]
     with pytest.raises(UserInputError, match="would overwrite --target"):
-        physinfer.prepare("pendulum", target=tmp_path / "in.mp4", out=tmp_path / "in.mp4")
+        physinfer.prepare("pendulum_lab", target=tmp_path / "in.mp4", out=tmp_path / "in.mp4")

@@ -28,7 +28,7 @@ def cli(*args):
 
 def test_refine_end_to_end_writes_every_output(tmp_path):
     out = tmp_path / "run"
-    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--out", str(out), "--json")
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "5", "--optimizer", "random", "--out", str(out), "--json")
     assert KEYS <= set(data)
     assert data["n_trials"] == 5 and data["n_failed"] == 0
     assert set(data["abs_errors"]) == {"length", "damping", "amplitude"}
@@ -41,7 +41,7 @@ def test_refine_end_to_end_writes_every_output(tmp_path):
 
 def test_select_top_re_simulates_the_best_trials_and_reports_the_chosen_one(tmp_path):
     out = tmp_path / "run"
-    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--select-top", "3",
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "5", "--optimizer", "random", "--select-top", "3",
                "--select-seeds", "2", "--floor-samples", "0", "--out", str(out), "--json")
     selection = data["selection"]
     assert [len(f["resimulated"]) for f in selection["finalists"]] == [2, 2, 2]
@@ -54,7 +54,7 @@ def test_ax_recovers_the_example_truth(tmp_path):
     amplitude. Damping is not held to one: at 20 trials it trades off against the amplitude,
     and where the fit lands along that ridge changed from machine to machine (0.037 1/s off on
     2026-11-21, 0.075–0.22 on 2026-11-24 for seeds 0–2)."""
-    data = cli("refine", "--plugin", "pendulum", "--steps", "20", "--out", str(tmp_path / "ax"), "--json")
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "20", "--out", str(tmp_path / "ax"), "--json")
     err = data["abs_errors"]
     assert err["length"] < 0.05 and err["amplitude"] < 5.0, err
 
@@ -62,7 +62,7 @@ def test_ax_recovers_the_example_truth(tmp_path):
 def test_killed_run_resumes_from_last_completed_trial(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.Popen(
-        [str(BIN), "refine", "--plugin", "pendulum", "--steps", "8", "--optimizer", "random", "--out", str(out)],
+        [str(BIN), "refine", "--plugin", "pendulum_lab", "--steps", "8", "--optimizer", "random", "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
     log = out / "trials.jsonl"
@@ -75,7 +75,7 @@ def test_killed_run_resumes_from_last_completed_trial(tmp_path):
     proc.wait()
     before = RunDirectory(out).read_trials()
     assert 3 <= len(before) < 8 and not (out / "result.json").exists()
-    data = cli("refine", "--plugin", "pendulum", "--steps", "8", "--optimizer", "random", "--out", str(out),
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "8", "--optimizer", "random", "--out", str(out),
                "--resume", "--json")
     after = RunDirectory(out).read_trials()
     assert data["n_trials"] == 8 and [t.step for t in after] == list(range(8))
@@ -85,16 +85,16 @@ def test_killed_run_resumes_from_last_completed_trial(tmp_path):
 def test_resume_refuses_other_plugin_and_corrupt_log(tmp_path):
     registry, _ = load_registry()
     out = tmp_path / "run"
-    refine(registry, plugin="pendulum", steps=2, optimizer="random", out=out, progress=False)
+    refine(registry, plugin="pendulum_lab", steps=2, optimizer="random", out=out, progress=False)
     with pytest.raises(UserInputError, match="--optimizer: run random, now cma"):
-        refine(registry, plugin="pendulum", steps=3, optimizer="cma", out=out, resume=True, progress=False)
+        refine(registry, plugin="pendulum_lab", steps=3, optimizer="cma", out=out, resume=True, progress=False)
     with pytest.raises(UserInputError, match="already holds a run"):
-        refine(registry, plugin="pendulum", steps=3, optimizer="random", out=out, progress=False)
+        refine(registry, plugin="pendulum_lab", steps=3, optimizer="random", out=out, progress=False)
     log = out / "trials.jsonl"
     log.write_text(log.read_text().replace('"distance"', '"distanc', 1))
     corrupt = log.read_bytes()
     with pytest.raises(UserInputError, match="line 1 is corrupt"):
-        refine(registry, plugin="pendulum", steps=3, optimizer="random", out=out, resume=True, progress=False)
+        refine(registry, plugin="pendulum_lab", steps=3, optimizer="random", out=out, resume=True, progress=False)
     assert log.read_bytes() == corrupt, "nothing is overwritten"
 
 
@@ -105,12 +105,12 @@ def test_resume_refuses_a_run_of_another_plugin(tmp_path):
     (out / "trials.jsonl").write_text("")
     registry, _ = load_registry()
     with pytest.raises(UserInputError, match="--plugin: run flag, now pendulum"):
-        refine(registry, plugin="pendulum", steps=2, out=out, resume=True, progress=False)
+        refine(registry, plugin="pendulum_lab", steps=2, out=out, resume=True, progress=False)
 
 
 def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, long_pendulums_blow_up):
     registry, _ = load_registry()
-    result = refine(registry, plugin="pendulum", steps=6, optimizer="random", seed=3, out=tmp_path / "r", progress=False)
+    result = refine(registry, plugin="pendulum_lab", steps=6, optimizer="random", seed=3, out=tmp_path / "r", progress=False)
     failed = [t for t in result.trials if t.status == "failed"]
     assert failed and all("blew up" in t.error for t in failed)
     assert result.n_failed == len(failed) and result.n_trials == 6
@@ -120,7 +120,7 @@ def test_failed_simulations_are_recorded_and_the_run_goes_on(tmp_path, long_pend
 def test_batches_propose_simulate_and_log_like_single_trials(tmp_path, pendulum_batch_sizes):
     """Random search draws per trial index, so q = 3 must log what q = 1 logs, trial for trial."""
     registry, _ = load_registry()
-    quick = dict(plugin="pendulum", steps=7, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
+    quick = dict(plugin="pendulum_lab", steps=7, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
     single = refine(registry, out=tmp_path / "q1", **quick)
     assert pendulum_batch_sizes == []
     batched = refine(registry, out=tmp_path / "q3", batch_size=3, **quick)
@@ -135,12 +135,12 @@ def test_batches_propose_simulate_and_log_like_single_trials(tmp_path, pendulum_
 
 def test_ax_proposes_batches_through_the_cli_and_resumes_with_another_size(tmp_path):
     out = tmp_path / "run"
-    data = cli("refine", "--plugin", "pendulum", "--steps", "9", "--batch-size", "4", "--floor-samples", "0",
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "9", "--batch-size", "4", "--floor-samples", "0",
                "--out", str(out), "--json")
     trials = RunDirectory(out).read_trials()
     assert data["n_trials"] == 9 and [t.step for t in trials] == list(range(9))
     assert len({t.index for t in trials}) == 9 and len({tuple(t.x) for t in trials}) == 9
-    resumed = cli("refine", "--plugin", "pendulum", "--steps", "11", "--batch-size", "2", "--floor-samples", "0",
+    resumed = cli("refine", "--plugin", "pendulum_lab", "--steps", "11", "--batch-size", "2", "--floor-samples", "0",
                   "--out", str(out), "--resume", "--json")
     after = RunDirectory(out).read_trials()
     assert resumed["n_trials"] == 11 and [t.x for t in after[:9]] == [t.x for t in trials]
@@ -154,7 +154,7 @@ def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, long_pendulums_
     """
     registry, _ = load_registry()
     threads_env = os.environ.get("NUMBA_NUM_THREADS")
-    result = refine(registry, plugin="pendulum", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
+    result = refine(registry, plugin="pendulum_lab", steps=8, optimizer="random", seed=3, out=tmp_path / "r",
                     progress=False, batch_size=4, seeds_per_trial=2, workers=workers)
     assert result.extra.get("executor", {}).get("kind") == (None if workers is None else "inline")
     assert os.environ.get("NUMBA_NUM_THREADS") == threads_env
@@ -168,11 +168,11 @@ def test_a_failure_in_a_batch_fails_only_its_own_trial(tmp_path, long_pendulums_
 def test_batch_size_must_be_positive(tmp_path):
     registry, _ = load_registry()
     with pytest.raises(UserInputError, match="--batch-size must be at least 1, got 0"):
-        refine(registry, plugin="pendulum", steps=3, out=tmp_path / "r", progress=False, batch_size=0)
+        refine(registry, plugin="pendulum_lab", steps=3, out=tmp_path / "r", progress=False, batch_size=0)
 
 
 def test_a_duration_the_phenomenon_cannot_record_is_refused(tmp_path):
     registry, _ = load_registry()
-    with pytest.raises(UserInputError, match="'pendulum' records a fixed length"):
-        refine(registry, plugin="pendulum", steps=2, out=tmp_path / "r", progress=False, duration_s=3.0)
+    with pytest.raises(UserInputError, match="'pendulum_lab' records a fixed length"):
+        refine(registry, plugin="pendulum_lab", steps=2, out=tmp_path / "r", progress=False, duration_s=3.0)
     assert not (tmp_path / "r").exists()

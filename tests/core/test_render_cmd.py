@@ -127,7 +127,7 @@ def test_the_pendulum_renders_a_trajectory_file_too(tmp_path):
     proc = run_cli(
         "render",
         "--plugin",
-        "pendulum",
+        "pendulum_lab",
         "--trajectory",
         str(tmp_path / "p.npz"),
         "--render-set",
@@ -283,7 +283,7 @@ def test_the_api_renders_a_trajectory_file_and_returns_the_clip(tmp_path):
     Trajectory(trajectory.vertices[:4], trajectory.faces, trajectory.fps, trajectory.extras).save(
         tmp_path / "p.npz"
     )
-    rendering = physinfer.render("pendulum", trajectory=tmp_path / "p.npz", render_set={"size": 32})
+    rendering = physinfer.render("pendulum_lab", trajectory=tmp_path / "p.npz", render_set={"size": 32})
     assert rendering.clip.frames.shape == (4, 32, 32, 3) and rendering.paths == {}
     assert rendering.to_dict()["n_frames"] == 4 and rendering.to_dict()["source"] == "npz"
     assert len(rendering.plot(n=2).axes) == 2

@@ -23,7 +23,7 @@ from physinfer.report import REPORT_FILE, build_report, run_kind, write_report, 
 
 QUICK_REFINE = (
     "--plugin",
-    "pendulum",
+    "pendulum_lab",
     "--steps",
     "2",
     "--optimizer",
@@ -149,7 +149,7 @@ def test_an_infer_run_gets_a_posterior_page(tmp_path):
             ParameterSpec("drag", (0.1, 10.0), scaling="log"),
         ]
     )
-    config = EstimatorConfig(plugin="pendulum", embedder="grid_spectrum", embedder_frames=30, embedder_fps=25.0,
+    config = EstimatorConfig(plugin="pendulum_lab", embedder="grid_spectrum", embedder_frames=30, embedder_fps=25.0,
                              probe=[0.0], clip_seconds=2.0, parameters=space.to_dict(), x_dim=4)  # fmt: skip
     estimator = PosteriorEstimator(config, torch.nn.Identity())  # write_report reads only its space
     rng = np.random.default_rng(0)
@@ -274,7 +274,7 @@ def test_a_diagnosis_gets_a_page_with_its_verdict_maps_and_video(tmp_path):
 
     registry, _ = load_registry()
     out = tmp_path / "diagnosis"
-    settings = DiagnoseSettings(plugin="pendulum", out=out, render_set={"size": 48}, steps=2, optimizer="random",
+    settings = DiagnoseSettings(plugin="pendulum_lab", out=out, render_set={"size": 48}, steps=2, optimizer="random",
                                 floor_samples=4, calibrate=False)  # fmt: skip
     report = run_diagnosis(registry, settings)
     page = (out / REPORT_FILE).read_text()

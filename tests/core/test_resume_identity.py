@@ -32,7 +32,7 @@ def pendulum_run(registry, tmp_path_factory):
     out = tmp_path_factory.mktemp("identity") / "run"
     refine(
         registry,
-        plugin="pendulum",
+        plugin="pendulum_lab",
         steps=2,
         out=out,
         fixed=["amplitude=40"],
@@ -44,7 +44,7 @@ def pendulum_run(registry, tmp_path_factory):
 
 def resume(registry, out, **changes):
     settings = dict(
-        plugin="pendulum", steps=3, fixed=["amplitude=40"], render_set={"size": 64}, **CHEAP
+        plugin="pendulum_lab", steps=3, fixed=["amplitude=40"], render_set={"size": 64}, **CHEAP
     )
     return refine(registry, out=out, resume=True, **{**settings, **changes})
 
@@ -78,7 +78,7 @@ def test_a_resume_that_differs_is_refused_with_a_short_diff_and_changes_nothing(
 def test_another_target_or_other_embedder_weights_are_refused_and_the_same_settings_resume(
     registry, pendulum_run, tmp_path
 ):
-    pipeline = build_pipeline(registry, "pendulum", embedder="")
+    pipeline = build_pipeline(registry, "pendulum_lab", embedder="")
     clip = pipeline.phenomenon.default_target().clip
     other = tmp_path / "other.mp4"
     write_video(other, Clip(np.ascontiguousarray(clip.frames[:, :, ::-1]), clip.fps))  # mirrored
@@ -113,7 +113,7 @@ def test_resume_and_overwrite_together_are_refused(registry, tmp_path):
     ):
         refine(
             registry,
-            plugin="pendulum",
+            plugin="pendulum_lab",
             steps=2,
             out=tmp_path / "r",
             resume=True,
@@ -125,7 +125,7 @@ def test_resume_and_overwrite_together_are_refused(registry, tmp_path):
 def test_resume_differences_name_what_differs_in_the_clis_words():
     space = [{"name": "length", "bounds": [0.2, 2.0], "scaling": "linear", "description": "a"}]
     stored = {
-        "plugin": "pendulum", "seed": 0, "effects": [], "parameters": space, "weights_sha256": "sha256:" + "a" * 64,
+        "plugin": "pendulum_lab", "seed": 0, "effects": [], "parameters": space, "weights_sha256": "sha256:" + "a" * 64,
         "embedder_fingerprint": [1.0, -2.0, 0.5], "duration_s": None, "start_x": [0.1, -0.2],
     }  # fmt: skip
     assert resume_differences(stored, dict(stored)) == []

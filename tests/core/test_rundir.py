@@ -21,7 +21,7 @@ from physinfer.session import refine
 from physinfer.video import write_video
 
 BIN = Path(sys.executable).parent / "physinfer"
-QUICK = {"plugin": "pendulum", "steps": 2, "optimizer": "random", "progress": False, "noise_samples": 0,
+QUICK = {"plugin": "pendulum_lab", "steps": 2, "optimizer": "random", "progress": False, "noise_samples": 0,
          "floor_samples": 0}
 
 
@@ -35,7 +35,7 @@ def users_folder(registry, tmp_path):
     """A folder of the user's: their target video and a result.json of their own."""
     work = tmp_path / "work"
     work.mkdir()
-    write_video(work / "target.mp4", registry.phenomenon("pendulum").default_target().clip)
+    write_video(work / "target.mp4", registry.phenomenon("pendulum_lab").default_target().clip)
     (work / "result.json").write_text('{"mine": true}')
     return work
 
@@ -57,7 +57,7 @@ def test_refine_into_a_folder_of_the_users_files_is_refused_and_writes_nothing(r
 def test_refine_cli_refuses_a_target_inside_out_with_one_line(users_folder):
     before = contents(users_folder)
     proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum", "--target", str(users_folder / "target.mp4"),
+        [str(BIN), "refine", "--plugin", "pendulum_lab", "--target", str(users_folder / "target.mp4"),
          "--out", str(users_folder), "--steps", "2", "--json"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
@@ -83,11 +83,11 @@ def test_a_target_the_run_would_write_is_refused(registry, tmp_path):
 
 def test_overwrite_removes_the_old_runs_files_and_nothing_else(tmp_path):
     run_dir = RunDirectory(tmp_path / "run")
-    run_dir.create({"plugin": "pendulum", "parameters": {}})
+    run_dir.create({"plugin": "pendulum_lab", "parameters": {}})
     for name in RUN_OUTPUTS[1:]:
         (run_dir.path / name).write_text("old")
     (run_dir.path / "notes.txt").write_text("mine")
-    run_dir.create({"plugin": "pendulum", "parameters": {}, "seed": 1}, overwrite=True)
+    run_dir.create({"plugin": "pendulum_lab", "parameters": {}, "seed": 1}, overwrite=True)
     left = {p.name for p in run_dir.path.iterdir()}
     assert left == {"run.json", "trials.jsonl", "notes.txt"}, "no output of the old run may sit beside the new one"
     assert (run_dir.path / "notes.txt").read_text() == "mine"
@@ -95,7 +95,7 @@ def test_overwrite_removes_the_old_runs_files_and_nothing_else(tmp_path):
 
 def test_a_run_json_physinfer_did_not_write_is_not_a_run(tmp_path):
     run_dir = RunDirectory(tmp_path / "run")
-    run_dir.create({"plugin": "pendulum", "parameters": {}})
+    run_dir.create({"plugin": "pendulum_lab", "parameters": {}})
     (run_dir.path / "notes.txt").write_text("mine")
     run_dir.check_out(overwrite=True)  # physinfer's run, with a file of the user's beside it: accepted
     (tmp_path / "run.json").write_text('{"name": "my own run.json"}')
@@ -142,13 +142,13 @@ def test_an_empty_folder_left_with_a_lock_file_is_usable(registry, tmp_path):
 def test_diagnose_refuses_a_folder_of_the_users_files_and_a_second_writer(registry, users_folder, tmp_path):
     before = contents(users_folder)
     with pytest.raises(UserInputError, match="is not empty .* holds no diagnosis"):
-        run_diagnosis(registry, DiagnoseSettings(plugin="pendulum", out=users_folder, steps=2))
+        run_diagnosis(registry, DiagnoseSettings(plugin="pendulum_lab", out=users_folder, steps=2))
     assert contents(users_folder) == before
     out = tmp_path / "diagnosis"
     holder = hold_lock(out)
     try:
         with pytest.raises(UserInputError, match=f"process {holder.pid}"):
-            run_diagnosis(registry, DiagnoseSettings(plugin="pendulum", out=out, steps=2))
+            run_diagnosis(registry, DiagnoseSettings(plugin="pendulum_lab", out=out, steps=2))
     finally:
         os.kill(holder.pid, signal.SIGKILL)
         holder.wait()

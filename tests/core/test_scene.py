@@ -63,12 +63,12 @@ def test_bad_scene_settings_are_one_clear_line_before_anything_runs(
 
 def test_a_plugin_without_scene_settings_refuses_scene_set(physinfer_cli, tmp_path):
     ran = physinfer_cli(
-        "simulate", "--plugin", "pendulum", "--scene-set", "length=2", "--trajectory-out",
+        "simulate", "--plugin", "pendulum_lab", "--scene-set", "length=2", "--trajectory-out",
         tmp_path / "t.npz", "--json",
     )  # fmt: skip
     assert ran.returncode == 2
     assert ran.json()["error"] == (
-        "the phenomenon 'pendulum' has no scene settings (its plugin declares none); drop --scene-set"
+        "the phenomenon 'pendulum_lab' has no scene settings (its plugin declares none); drop --scene-set"
     )
 
 
@@ -169,4 +169,4 @@ def test_plugins_json_lists_each_phenomenons_scene_settings(physinfer_cli):
     listed = physinfer_cli("plugins", "--json").json()["scene_settings"]
     flag = {s["name"]: s for s in listed["flag"]}
     assert flag["pinning"]["choices"] == ["hoist", "corners"] and flag["flag_length"]["unit"] == "m"
-    assert listed["pendulum"] == []
+    assert listed["pendulum_lab"] == []

@@ -21,11 +21,11 @@ def registry():
 
 @pytest.fixture
 def pendulum(registry):
-    return registry.phenomenon("pendulum")
+    return registry.phenomenon("pendulum_lab")
 
 
 def _register(registry, name, factory):
-    registry.scoped("tests").add_effect(name, factory, phenomenon="pendulum")
+    registry.scoped("tests").add_effect(name, factory, phenomenon="pendulum_lab")
 
 
 def _drag_variant(name, spec=None, *, term=None):
@@ -74,7 +74,7 @@ def test_an_effect_that_changes_nothing_or_clashes_is_refused(registry, pendulum
         check_effect(pendulum, "inert", registry=registry)
     clash = ParameterSpec("damping", (0.0, 1.0), default=0.0)
     _register(registry, "clashing", _drag_variant("clashing", clash))
-    with pytest.raises(AssertionError, match="damping clash with 'pendulum'"):
+    with pytest.raises(AssertionError, match="damping clash with 'pendulum_lab'"):
         check_effect(pendulum, "clashing", registry=registry)
     _register(registry, "misnamed", _drag_variant("quadratic_drag"))
     with pytest.raises(

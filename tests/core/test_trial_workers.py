@@ -12,7 +12,7 @@ from physinfer.plugins import load_registry
 from physinfer.session import refine
 
 BIN = Path(sys.executable).parent / "physinfer"
-QUICK = dict(plugin="pendulum", steps=5, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
+QUICK = dict(plugin="pendulum_lab", steps=5, optimizer="random", progress=False, noise_samples=0, floor_samples=0)
 
 
 def cli(*args):
@@ -30,7 +30,7 @@ def in_process(tmp_path_factory):
 
 def test_local_worker_processes_log_the_same_trials(tmp_path, in_process):
     out = tmp_path / "r"
-    data = cli("refine", "--plugin", "pendulum", "--steps", "5", "--optimizer", "random", "--noise-samples", "0",
+    data = cli("refine", "--plugin", "pendulum_lab", "--steps", "5", "--optimizer", "random", "--noise-samples", "0",
                "--floor-samples", "0", "--batch-size", "2", "--seeds-per-trial", "2", "--workers", "2",
                "--out", str(out), "--json")
     assert data["executor"] == {"kind": "processes", "workers": 2, "threads": 1, "address": None}

@@ -21,7 +21,7 @@ from physinfer.roles import Renderer
 from physinfer.session import build_pipeline, refine
 
 BIN = Path(sys.executable).parent / "physinfer"
-QUICK = {"plugin": "pendulum", "steps": 2, "optimizer": "random", "progress": False, "noise_samples": 0,
+QUICK = {"plugin": "pendulum_lab", "steps": 2, "optimizer": "random", "progress": False, "noise_samples": 0,
          "floor_samples": 0}
 
 
@@ -78,7 +78,7 @@ def test_the_host_refuses_non_finite_and_non_numeric_values_for_a_renderer_witho
 
 def test_the_cli_refuses_a_huge_render_size_with_one_json_error_and_no_run(tmp_path):
     proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum", "--render-set", "size=100000", "--out", str(tmp_path / "r"),
+        [str(BIN), "refine", "--plugin", "pendulum_lab", "--render-set", "size=100000", "--out", str(tmp_path / "r"),
          "--json"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
@@ -110,8 +110,8 @@ def test_a_repeated_set_fix_or_effect_is_refused(registry):
     with pytest.raises(UserInputError, match=r"--set length is given twice \(length=1 and length=1.2\)"):
         parse_assignments(["length=1", "length=1.2"], "--set")
     with pytest.raises(UserInputError, match="--effect quadratic_drag is given twice"):
-        build_pipeline(registry, "pendulum", effects=["quadratic_drag", "quadratic_drag"], embedder="")
-    space = registry.phenomenon("pendulum").make_simulator([]).parameter_space
+        build_pipeline(registry, "pendulum_lab", effects=["quadratic_drag", "quadratic_drag"], embedder="")
+    space = registry.phenomenon("pendulum_lab").make_simulator([]).parameter_space
     with pytest.raises(UserInputError, match="--fix length is given twice"):
         resolve_fixed(space, ["length=1", "length=1.2"])
     with pytest.raises(UserInputError, match="length is already fixed at 1 by another --fix"):
@@ -120,7 +120,7 @@ def test_a_repeated_set_fix_or_effect_is_refused(registry):
 
 def test_simulate_refuses_a_repeated_effect_with_one_line(tmp_path):
     result = CliRunner().invoke(
-        app, ["simulate", "--plugin", "pendulum", "--effect", "quadratic_drag", "--effect", "quadratic_drag",
+        app, ["simulate", "--plugin", "pendulum_lab", "--effect", "quadratic_drag", "--effect", "quadratic_drag",
               "--out", str(tmp_path / "p.mp4"), "--json"],
     )  # fmt: skip
     assert result.exit_code == 2, result.output
@@ -129,7 +129,7 @@ def test_simulate_refuses_a_repeated_effect_with_one_line(tmp_path):
 
 def test_simulate_refuses_an_out_that_is_a_directory(tmp_path):
     (tmp_path / "clip.mp4").mkdir()
-    result = CliRunner().invoke(app, ["simulate", "--plugin", "pendulum", "--out", str(tmp_path / "clip.mp4"), "--json"])
+    result = CliRunner().invoke(app, ["simulate", "--plugin", "pendulum_lab", "--out", str(tmp_path / "clip.mp4"), "--json"])
     assert result.exit_code == 2, result.output
     assert "is a directory; give a file name" in json.loads(result.stdout)["error"]
 

@@ -262,7 +262,7 @@ def test_a_static_or_tiny_target_is_refused_with_one_line(tmp_path, physinfer_cl
         strip = write_video(tmp_path / f"strip{height}.gif", Clip(_moving(20, height, 128), 25.0))
         with pytest.raises(UserInputError, match=f"128×{height} pixels; a target needs at least 32"):
             read_target_video(strip)
-    proc = physinfer_cli("refine", "--plugin", "pendulum", "--target", static, "--steps", "2",
+    proc = physinfer_cli("refine", "--plugin", "pendulum_lab", "--target", static, "--steps", "2",
                          "--out", tmp_path / "run", "--json")  # fmt: skip
     assert proc.returncode == 2 and "nothing moves" in proc.json()["error"]
     assert not (tmp_path / "run" / "trials.jsonl").exists()

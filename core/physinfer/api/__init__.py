@@ -4,8 +4,8 @@
 
     import physinfer
 
-    sim = physinfer.simulate("pendulum", set={"length": 1.2})
-    result = physinfer.refine("pendulum", steps=20, out="runs/pendulum")
+    sim = physinfer.simulate("pendulum_lab", set={"length": 1.2})
+    result = physinfer.refine("pendulum_lab", steps=20, out="runs/pendulum")
     result.best_params, result.posterior, result.to_dict(), result.plot()
 
 (The package re-exports the commands and their options: ``physinfer.refine`` is

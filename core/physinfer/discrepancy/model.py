@@ -3,7 +3,7 @@
 ``physinfer diagnose`` writes it; ``physinfer refine --model FILE`` reads it to refine
 the augmented model, warm-started from the values the diagnosis found. JSON::
 
-    {"format": "physinfer-model/1", "plugin": "pendulum", "effects": ["quadratic_drag"],
+    {"format": "physinfer-model/1", "plugin": "pendulum_lab", "effects": ["quadratic_drag"],
      "parameters": [... ParameterSpace.to_dict() ...], "values": {"length": 1.2, ...},
      "gap": 0.41, "source": "runs/diag/effect-quadratic_drag"}
 """

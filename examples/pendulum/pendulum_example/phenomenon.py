@@ -33,7 +33,7 @@ def make_phenomenon() -> Phenomenon:
     from pendulum_example.physics import make_simulator, pendulum_parameter_space
 
     return Phenomenon(
-        name="pendulum",
+        name="pendulum_lab",
         description="a damped pendulum swinging in front of a wall (worked example)",
         parameter_space=pendulum_parameter_space(),
         make_simulator=make_simulator,

@@ -127,7 +127,7 @@ class QuadraticDrag(Effect):
 
     name = "quadratic_drag"
     description = "air drag growing with the square of the bob's speed"
-    phenomenon = "pendulum"
+    phenomenon = "pendulum_lab"
     parameter_space = ParameterSpace(
         [
             ParameterSpec(

@@ -10,7 +10,7 @@ from physinfer.hooks import hookimpl
 @hookimpl
 def physinfer_register_phenomena(registry):
     registry.add_phenomenon(
-        "pendulum", "pendulum_example.phenomenon:make_phenomenon", "damped pendulum (worked example)"
+        "pendulum_lab", "pendulum_example.phenomenon:make_phenomenon", "the lab pendulum: a synthetic damped pendulum (worked example)"
     )
 
 
@@ -19,6 +19,6 @@ def physinfer_register_effects(registry):
     registry.add_effect(
         "quadratic_drag",
         "pendulum_example.physics:QuadraticDrag",
-        phenomenon="pendulum",
+        phenomenon="pendulum_lab",
         description="air drag growing with the square of the bob's speed",
     )

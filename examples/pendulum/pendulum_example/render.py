@@ -30,7 +30,7 @@ class PendulumRenderParams(MappingSettings):
     """
 
     settings_noun: ClassVar[str] = "render parameter"
-    settings_owner: ClassVar[str] = "pendulum"
+    settings_owner: ClassVar[str] = "pendulum_lab"
 
     size: int = 128
     distance: float = 3.2

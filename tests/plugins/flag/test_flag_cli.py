@@ -207,11 +207,11 @@ def test_installed_cli_mounts_the_commands_and_refuses_other_plugins(tmp_path):
     ).stdout
     assert "triplets" in help_text and "wind" in help_text
     proc = subprocess.run(
-        [str(BIN), "train", "--plugin", "pendulum", "--data", str(tmp_path), "--out", str(tmp_path / "m"), "--json"],
+        [str(BIN), "train", "--plugin", "pendulum_lab", "--data", str(tmp_path), "--out", str(tmp_path / "m"), "--json"],
         capture_output=True,
         text=True,
     )
     assert proc.returncode == 2, proc.stderr
     error = json.loads(proc.stdout)["error"]
-    assert "flag" in error and "pendulum" in error
+    assert "flag" in error and "pendulum_lab" in error
     assert proc.stderr.startswith("error:") and "Traceback" not in proc.stderr

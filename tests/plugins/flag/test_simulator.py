@@ -198,7 +198,7 @@ class Yaw(Effect):
 
 
 class OtherPhenomenon(Yaw):
-    phenomenon = "pendulum"
+    phenomenon = "pendulum_lab"
 
 
 def test_an_effect_rewrites_the_wind_without_touching_the_solver():
@@ -208,7 +208,7 @@ def test_an_effect_rewrites_the_wind_without_touching_the_solver():
     straight = sim.simulate({"wind_speed": 6.0, "yaw_deg": 0.0}).vertices[:, fly]
     turned = sim.simulate({"wind_speed": 6.0, "yaw_deg": 90.0}).vertices[:, fly]
     assert straight[..., 0].mean() > 1.0 and turned[..., 1].mean() > 1.0
-    with pytest.raises(UserInputError, match="pendulum"):
+    with pytest.raises(UserInputError, match="pendulum_lab"):
         make_simulator(effects=[OtherPhenomenon()])
 
 
