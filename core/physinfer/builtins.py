@@ -23,6 +23,11 @@ def physinfer_register_embedders(registry: Registry) -> None:
         "physinfer.embedders:GridSpectrumEmbedder",
         "parameter-free: pixel spectra pooled over a grid (any phenomenon)",
     )
+    registry.add_embedder(
+        "motion",
+        "physinfer.embedders:MotionSpectrumEmbedder",
+        "parameter-free: spectra of the tracked path of what moves (looks left out; real footage)",
+    )
 
 
 @hookimpl

@@ -1,6 +1,8 @@
-"""A parameter-free spectral embedder that works for any phenomenon.
+"""Parameter-free embedders that work for any phenomenon.
 
-It follows the paper's idea — the spatial distribution of temporal spectral power —
+:class:`MotionSpectrumEmbedder` (``motion``) compares how the subject moves, from its tracked
+path, and leaves looks out: the one for real footage. :class:`GridSpectrumEmbedder`
+(``grid_spectrum``) follows the paper's idea — the spatial distribution of temporal spectral power —
 without learning: the clip is turned to grayscale, cropped and shrunk, each pixel's
 signal is Hann-windowed and Fourier-transformed (zero-padded, so the spectrum varies
 smoothly with the frequency of the motion), and the power is pooled over a grid of
@@ -11,10 +13,12 @@ growing motion is told apart. numpy only.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from physinfer.errors import UserInputError
 from physinfer.roles import Embedder
 from physinfer.types import Clip
 from physinfer.video import prepare_for_embedding
@@ -126,3 +130,134 @@ class GridSpectrumEmbedder(Embedder):
         envelope = self._cells(np.stack([np.mean(s**2, axis=-1) for s in segments], axis=-1))
         # Amplitudes, not powers: distances then grow roughly linearly with motion differences.
         return (np.concatenate([np.sqrt(spectrum), 10.0 * np.sqrt(envelope)]) * 10.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class MotionSpectrumConfig:
+    """Settings of :class:`MotionSpectrumEmbedder`.
+
+    Attributes:
+        fps: Frame rate clips are resampled to.
+        n_frames: Fewest frames a clip must have (one second at ``fps`` by default).
+        max_seconds: Longest stretch read from the start of a clip.
+        size: Side of the square a video is framed to before tracking (``prepare``).
+        f_min: Lowest frequency of the spectral grid in Hz.
+        f_max: Highest frequency in Hz (below the Nyquist frequency).
+        n_freqs: Points of the log-spaced frequency grid.
+        widths: Smoothing widths of the spectra in natural-log frequency, narrow to broad: the
+            narrow ones place a frequency precisely, the broad ones keep the distance falling
+            towards it from far away (an optimizer finds the basin).
+        n_segments: Consecutive segments whose swing amplitude is kept (the decay).
+    """
+
+    fps: float = 20.0
+    n_frames: int = 20
+    max_seconds: float = 40.0
+    size: int = 128
+    f_min: float = 0.1
+    f_max: float = 8.0
+    n_freqs: int = 72
+    widths: tuple[float, ...] = (0.03, 0.1, 0.3)
+    n_segments: int = 4
+
+    def validate(self) -> None:
+        """Raise :class:`ValueError` on inconsistent settings."""
+        if not 0 < self.f_min < self.f_max < self.fps / 2:
+            raise ValueError("need 0 < f_min < f_max < fps / 2")
+        if self.n_frames < 8 or self.max_seconds * self.fps < self.n_frames:
+            raise ValueError("need n_frames >= 8 and max_seconds * fps >= n_frames")
+        if not self.widths or min(self.widths) <= 0:
+            raise ValueError("widths must be positive")
+
+
+def smoothed_spectra(signals: np.ndarray, fps: float, grid: np.ndarray, widths: Sequence[float]) -> np.ndarray:
+    """Hann-windowed power spectra of ``signals`` smoothed in log frequency onto ``grid``.
+
+    Args:
+        signals: ``(K, T)`` real signals.
+        fps: Sampling rate in Hz.
+        grid: ``(F,)`` frequencies in Hz.
+        widths: Gaussian widths in natural-log frequency.
+
+    Returns:
+        ``(len(widths), K, F)`` power, each row a weighted mean of the periodogram.
+    """
+    t = signals.shape[-1]
+    x = (signals - signals.mean(axis=-1, keepdims=True)) * np.hanning(t)
+    n_fft = max(4096, 1 << int(np.ceil(np.log2(8 * t))))
+    power = np.abs(np.fft.rfft(x, n=n_fft, axis=-1)) ** 2 / t
+    freqs = np.fft.rfftfreq(n_fft, d=1.0 / fps)[1:]
+    log_f, log_grid = np.log(freqs), np.log(grid)
+    out = []
+    for width in widths:
+        kernel = np.exp(-0.5 * ((log_f[None, :] - log_grid[:, None]) / width) ** 2)  # (F, n)
+        kernel /= kernel.sum(axis=1, keepdims=True)
+        out.append(power[:, 1:] @ kernel.T)
+    return np.stack(out)
+
+
+class MotionSpectrumEmbedder(Embedder):
+    """Embeds how the subject moves, not how it looks: spectra of its tracked path.
+
+    The clip is reduced to the path of what moves (:func:`physinfer.tracking.track_motion`),
+    turned into its principal axes (``u`` along the swing, ``v`` across it), and described
+    by (1) the power spectrum of ``u`` on a log-frequency grid, smoothed at several widths
+    and normalised to unit sum, (2) the spectrum of ``v`` on the same scale (the ratio tells
+    the arc's curvature), and (3) the swing's amplitude in consecutive segments relative to
+    the whole (its decay). Phase, the subject's place and size in the image, the camera's
+    roll and every colour and texture leave it unchanged: a real video and a render of the
+    same motion embed alike.
+
+    Clips are read whole (up to ``max_seconds``), so a simulation must span as long as its
+    target: phenomena whose simulator takes ``duration_s`` and that set
+    ``duration_from_target`` get that from the host.
+
+    Args:
+        config: Settings.
+        model: Ignored (the factory signature).
+        device: Ignored (numpy on CPU).
+        n_frames: Fewest frames a clip must have, overriding ``config.n_frames``.
+    """
+
+    def __init__(
+        self,
+        *,
+        config: MotionSpectrumConfig | None = None,
+        model: str | None = None,
+        device: str | None = None,
+        n_frames: int | None = None,
+    ) -> None:
+        self.config = config or MotionSpectrumConfig()
+        if n_frames is not None:
+            self.config = replace(self.config, n_frames=int(n_frames))
+        self.config.validate()
+        self.fps, self.n_frames, self.size = self.config.fps, self.config.n_frames, self.config.size
+        self._grid = np.geomspace(self.config.f_min, self.config.f_max, self.config.n_freqs)
+
+    def track(self, clip: Clip):  # noqa: ANN201 - MotionTrack, imported lazily
+        """The subject's path in ``clip`` at the embedder's frame rate and length."""
+        from physinfer.tracking import track_motion
+        from physinfer.video import resample
+
+        c = self.config
+        clip = resample(clip, c.fps)
+        if clip.n_frames < c.n_frames:
+            raise UserInputError(
+                f"the clip is too short: {clip.n_frames / c.fps:.2f} s; the motion embedder needs at least "
+                f"{c.n_frames / c.fps:.2f} s"
+            )
+        return track_motion(Clip(clip.frames[: int(round(c.max_seconds * c.fps))], c.fps))
+
+    def embed(self, clip: Clip) -> np.ndarray:
+        """Embed a clip; returns ``(2 · len(widths) · n_freqs + n_segments,)`` float32."""
+        c = self.config
+        u, v, _ = self.track(clip).axes()
+        scale = float(np.sqrt(np.mean(u**2)))
+        if scale < 1e-6:
+            raise UserInputError("the tracked subject does not move")
+        spectra = smoothed_spectra(np.stack([u, v]) / scale, c.fps, self._grid, c.widths)  # (W, 2, F)
+        spectra /= spectra[:, :1].sum(axis=-1, keepdims=True)  # u's spectrum sums to 1 at each width
+        segments = np.array_split(u, c.n_segments)
+        envelope = np.array([np.sqrt(np.mean(s**2)) for s in segments]) / scale
+        # Amplitudes, not powers (as grid_spectrum): distances grow about linearly with differences.
+        return np.concatenate([np.sqrt(spectra).ravel() * 3.0, envelope]).astype(np.float32)

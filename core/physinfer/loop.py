@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.adequacy import assess_fit
 from physinfer.errors import UserInputError
 from physinfer.evaluation import (  # noqa: F401 - re-exported: the loop's evaluation API
     NON_FINITE,
@@ -315,11 +316,20 @@ def _run_refinement(
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem
-    result.extra["at_bounds"] = space.at_bounds(result.best_params)
+    nuisance = [name for name in pipeline.phenomenon.nuisance if name in result.best_params]
+    if nuisance:  # reported apart; a bound of a nuisance (a phase of 0 or 1 cycle) says nothing
+        result.extra["nuisance"] = {name: result.best_params[name] for name in nuisance}
+    result.extra["at_bounds"] = {
+        name: bound for name, bound in space.at_bounds(result.best_params).items() if name not in nuisance
+    }
     if selection is not None:
         result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
     if config.floor_samples:
         result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
+    if np.isfinite(result.best_distance):
+        result.extra["adequacy"] = assess_fit(
+            pipeline, result.best_params, result.best_distance, target, result.extra.get("noise_floor"), config.seed
+        )
     return result
 
 

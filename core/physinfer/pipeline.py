@@ -163,6 +163,19 @@ def make_simulator(phenomenon: Any, effects: Sequence[Any], duration_s: float | 
     return phenomenon.make_simulator(effects, duration_s=duration_s)
 
 
+def target_duration(pipeline: Pipeline, target: Target) -> float | None:
+    """Seconds to simulate so that simulations span as long as ``target``, for a phenomenon
+    that asks for it (``duration_from_target``); ``None`` otherwise.
+
+    Capped at what the embedder reads (``config.max_seconds``, where it has one).
+    """
+    if not pipeline.phenomenon.duration_from_target:
+        return None
+    seconds = target.clip.n_frames / float(target.clip.fps)
+    cap = getattr(getattr(pipeline.embedder, "config", None), "max_seconds", None)
+    return round(min(seconds, cap) if cap else seconds, 3)
+
+
 def full_parameter_space(pipeline: Pipeline, fixed: Sequence[str]) -> ParameterSpace:
     """Every parameter of the pipeline's model, those ``--fix`` (``fixed``, its items) holds included.
 

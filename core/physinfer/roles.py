@@ -286,6 +286,19 @@ class Phenomenon:
             optimizer's own step (the pendulum: 0.16 s to simulate, render and embed against
             0.5 s of Ax's GP fit and acquisition), 2 halves the GP fits; where simulating
             dominates (the flag), 1 keeps every search step informed by the last trial.
+        nuisance: Names of θ entries that are nuisance parameters: what a real video leaves
+            unknown but the physics does not care about (a pendulum's phase at the first
+            frame). They are searched like the rest and reported apart (``result.json``
+            ``nuisance``), never as a measurement.
+        duration_from_target: Simulate as long as the target lasts when ``--duration`` is
+            not given (the phenomenon's ``make_simulator`` must take ``duration_s``): for
+            embedders that read a clip whole (``motion``), so a 25-s phone video is compared
+            with 25-s simulations and a 2-s clip with 2-s ones.
+        video_estimate: ``(clip) -> {name: (value, low, high)}``: what the target video
+            tells directly, before any simulation (a pendulum's tracked period gives its
+            length within the range its unknown amplitude allows). ``refine`` without a
+            posterior estimator starts its search at these values and searches only
+            ``[low, high]`` for them (the whole range for the others); ``None``: no estimate.
     """
 
     name: str
@@ -307,3 +320,6 @@ class Phenomenon:
     scene_settings: tuple[SceneSetting, ...] = ()
     # Last, so that records built with positional arguments keep their meaning.
     diagnose_batch_size: int = 1
+    nuisance: tuple[str, ...] = ()
+    duration_from_target: bool = False
+    video_estimate: Callable[[Clip], dict[str, tuple[float, float, float]]] | None = None

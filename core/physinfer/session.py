@@ -24,6 +24,7 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     load_target,
     make_simulator,
     naming_effects,
+    target_duration,
 )
 from physinfer.registry import Registry
 from physinfer.roles import Target
@@ -76,6 +77,45 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
     return split_fixed(pipeline.simulator)[1] if fixed else {}
 
 
+
+
+def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict[str, Any]] | None:
+    """The search's start and box from what the target video tells directly
+    (``Phenomenon.video_estimate``), or ``None`` when the phenomenon reads nothing.
+
+    Returns:
+        ``(start_x, (lo, hi), record)``: normalised start and box, and the estimate for
+        ``run.json`` (``start``).
+    """
+    estimate_of = pipeline.phenomenon.video_estimate
+    if estimate_of is None:
+        return None
+    import numpy as np
+
+    space = pipeline.simulator.parameter_space
+    estimate = {k: v for k, v in estimate_of(target.clip).items() if k in space.names}
+    if not estimate:
+        return None
+    lo, hi = -np.ones(len(space.names)), np.ones(len(space.names))
+    for i, spec in enumerate(space):
+        if spec.name in estimate:
+            low, high = sorted(np.clip(spec.to_unit(np.array(estimate[spec.name][1:])), -1.0, 1.0))
+            lo[i], hi[i] = low, high
+    values = {spec.name: float(np.clip(estimate[spec.name][0], *spec.bounds)) for spec in space if spec.name in estimate}
+    centre = np.clip(space.to_unit(space.complete(values)), lo, hi)  # the others start at their defaults
+    record: dict[str, Any] = {"video_estimate": {k: [float(x) for x in v] for k, v in estimate.items()}}
+    outside = {
+        spec.name: ("below" if estimate[spec.name][0] < spec.bounds[0] else "above")
+        for spec in space
+        if spec.name in estimate and not spec.bounds[0] <= estimate[spec.name][0] <= spec.bounds[1]
+    }
+    if outside:  # the search stays in range; the answer must say the video points beyond it
+        record["outside_range"] = {
+            name: f"the video suggests {name} {side} {space[name].bounds[0 if side == 'below' else 1]:g} "
+            f"{space[name].unit} ({estimate[name][0]:.3g} from the video alone)"
+            for name, side in outside.items()
+        }
+    return centre, (lo, hi), record
 
 
 def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
@@ -187,6 +227,11 @@ def refine(
             pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed,
             conditioning=conditioning,
         )  # fmt: skip
+    if duration_s is None and (duration_s := target_duration(pipeline, target)) is not None:
+        pipeline = build_pipeline(
+            registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
+            duration_s=duration_s, embedder_frames=embedder_frames, scene_set=scene_set,
+        )  # fmt: skip
     amortized, amortized_note = None, None
     if use_posterior:
         from physinfer.posterior.workflow import posterior_for_refinement
@@ -221,7 +266,7 @@ def refine(
         run_info["scene"] = scene
     run_info.update(resume_identity(target, weights))
     factory = registry.get("optimizers", optimizer).load()
-    start_x, post_start = None, None
+    start_x, post_start, video_start = None, None, None
     if model_file is not None:
         from physinfer.discrepancy.warmstart import warm_start_factory
 
@@ -237,6 +282,13 @@ def refine(
         start_x = post_start.start_x
         factory = warm_start_factory(factory, start_x, post_start.box)
         run_info["start"] = {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical}
+    elif (video_start := start_from_video(pipeline, target)) is not None:
+        from physinfer.discrepancy.warmstart import warm_start_factory
+
+        start_x, box, run_info["start"] = video_start
+        post_start = None
+        factory = warm_start_factory(factory, start_x, box)
+        run_info["search_box"] = [[float(v) for v in ends] for ends in box]
     # Every trial's coordinates depend on the warm start and the search box: part of the identity.
     run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
     if post_start is not None:
@@ -260,6 +312,8 @@ def refine(
             result.extra["scene"] = scene
         if target.conditions:
             result.extra["target_conditions"] = target.conditions
+        if video_start is not None:
+            result.extra["video_estimate"] = video_start[2]
         if executor is not None:
             result.extra["executor"] = executor
         if amortized is not None:

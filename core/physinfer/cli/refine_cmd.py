@@ -168,7 +168,18 @@ def refine_result_lines(result: Any) -> list[str]:
     best fit, posterior median, 90 % interval and label; the others named on one line (their
     best fit is where the search stopped, and a bound it stopped on says nothing either);
     correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
+    from physinfer.adequacy import verdict_line
+
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
+    adequacy = result.extra.get("adequacy")
+    if (verdict := verdict_line(adequacy)) is not None:
+        lines.append(verdict)
+    elif adequacy and adequacy.get("reproduces"):
+        lines.append(
+            f"  the best fit reproduces the video ({adequacy['statistic']:.3g} times the scale of agreement, "
+            f"≤ {adequacy['threshold']:g})"
+        )
+    nuisance = result.extra.get("nuisance") or {}
     if result.extra.get("scene"):
         from physinfer.scene import scene_text
 
@@ -179,10 +190,16 @@ def refine_result_lines(result: Any) -> list[str]:
     ]
     at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}
     for name, value in result.best_params.items():
-        if name not in hidden:
+        if name not in hidden and name not in nuisance:
             lines.append(
                 best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name))
             )
+    if nuisance:
+        lines.append(
+            "  nuisance (what the video leaves open, not a measurement): "
+            + ", ".join(f"{name} = {value:.3g}" for name, value in nuisance.items())
+        )
+    hidden = [name for name in hidden if name not in nuisance]
     if hidden:
         names = (
             ", ".join(hidden)
@@ -201,6 +218,8 @@ def refine_result_lines(result: Any) -> list[str]:
         lines.append(posterior_source_line(result.extra["posterior_source"]))
     for name, value in result.extra.get("fixed", {}).items():
         lines.append(f"  {name} = {value:.4g}   (fixed)")
+    for note in ((result.extra.get("video_estimate") or {}).get("outside_range") or {}).values():
+        lines.append(f"at the bound: {note}")
     if at_bounds:
         lines.append(
             f"{', '.join(at_bounds)} ended on a bound of the search range: the truth may lie beyond it, "

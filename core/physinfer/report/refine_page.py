@@ -32,6 +32,8 @@ def refine_content(run: Path) -> Content:
         )
         prior = read_json(run / "noise_prior.json", required=False)
         body = [_parameters(result, info), noise_section(result.get("noise_floor"), prior)]
+        if result.get("adequacy"):
+            body.insert(0, adequacy_section(result["adequacy"]))
     figure_html = figure(run / "refinement.png", "distance and parameters against the step")
     body.append(section("Refinement", figure_html))
     clip = video(run / "side_by_side.mp4", "the target (left) beside the best fit")
@@ -39,6 +41,21 @@ def refine_content(run: Path) -> Content:
     settings = {k: v for k, v in info.items() if k not in ("parameters", "truth")}
     body.append(section("Settings", key_values(settings)))
     return Content(title, subtitle, body)
+
+
+def adequacy_section(adequacy: Mapping[str, Any]) -> str:
+    """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
+    from physinfer.adequacy import verdict_line
+
+    line = verdict_line(adequacy)
+    if line is None and adequacy.get("reproduces"):
+        line = (
+            f"The best fit reproduces the video: {fmt(adequacy.get('statistic'))} times the scale of "
+            f"agreement (reproducing needs ≤ {fmt(adequacy.get('threshold'))})."
+        )
+    cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
+    text = line or str(adequacy.get("note", "no verdict"))
+    return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))
 
 
 def _parameters(result: Mapping[str, Any], info: Mapping[str, Any]) -> str:

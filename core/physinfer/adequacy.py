@@ -1,0 +1,106 @@
+"""Does the best fit reproduce the target? The model-adequacy verdict of every answer.
+
+A refinement always ends with a best θ, whether or not the model can make the video at all
+(a real pendulum fed to a world whose pivot is always in view; a two-corner flag read as a
+hoist-pinned one). A number then means nothing, and the tool must say so. The verdict
+compares the best fit's distance to the target with the scale on which the tool itself sees
+two versions of one video differ:
+
+- ``floor``: the noise floor, the median distance between re-simulations of the best θ under
+  other seeds (0 for a deterministic phenomenon);
+- ``codec``: the distance between the best fit's own clip and that clip passed through what
+  a camera does to a video (H.264 at a phone's quality, :data:`CODEC_CRF`, and sensor
+  noise of :data:`NOISE_SIGMA` grey levels), read back and embedded again.
+
+The scale is the larger of the two; the best fit reproduces the target when its distance is
+at most :data:`THRESHOLD` scales. The threshold's false-alarm rate on clean simulated
+targets (written to mp4, refined with defaults) is measured by ``benchmarks/bench_adequacy.py``
+(docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from physinfer.errors import SimulationFailed
+from physinfer.types import Clip
+
+if TYPE_CHECKING:
+    from physinfer.evaluation import Pipeline
+    from physinfer.roles import Target
+
+#: H.264 quality of the camera round trip (libx264's CRF: 23 default, phones about 23-28).
+CODEC_CRF = 28
+#: Sensor noise added before encoding, in grey levels (of 255).
+NOISE_SIGMA = 2.0
+#: Largest distance, in scales, at which the best fit counts as reproducing the target.
+THRESHOLD = 10.0
+METHOD = f"best distance / max(noise floor, H.264 CRF {CODEC_CRF} + noise round trip of the best fit)"
+
+
+def camera_round_trip(clip: Clip, *, crf: int = CODEC_CRF, sigma: float = NOISE_SIGMA, seed: int = 0) -> Clip:
+    """``clip`` with sensor noise, written as H.264 at ``crf`` and read back."""
+    from physinfer.video import read_video, write_video
+
+    rng = np.random.default_rng(seed)
+    noisy = np.clip(clip.frames.astype(np.float32) + rng.normal(0.0, sigma, clip.frames.shape), 0, 255)
+    with tempfile.TemporaryDirectory(prefix="physinfer-codec-") as folder:
+        path = write_video(Path(folder) / "round_trip.mp4", noisy.astype(np.uint8), clip.fps, crf=crf)
+        back = read_video(path)
+    frames = back.frames[: clip.n_frames, : clip.frames.shape[1], : clip.frames.shape[2]]
+    return Clip(frames, clip.fps)
+
+
+def codec_scale(pipeline: Pipeline, params: dict[str, float], target: Target, seed: int) -> float | None:
+    """Distance between the best fit's clip and its camera round trip (``None``: it failed)."""
+    try:
+        clip = pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), target.render_params)
+        clean = pipeline.embedder.embed(clip)
+        degraded = pipeline.embedder.embed(camera_round_trip(clip, seed=seed))
+    except SimulationFailed:
+        return None
+    return float(np.sum((np.asarray(clean, float) - np.asarray(degraded, float)) ** 2))
+
+
+def verdict(best_distance: float, floor: float | None, codec: float | None) -> dict[str, Any]:
+    """The ``adequacy`` record: ``reproduces``, ``statistic`` (distance in scales),
+    ``threshold``, ``method``, and the parts of the scale."""
+    scale = max(floor or 0.0, codec or 0.0)
+    if not scale > 0 or not np.isfinite(best_distance):
+        return {"reproduces": None, "statistic": None, "threshold": THRESHOLD, "method": METHOD,
+                "floor": floor, "codec": codec, "note": "no scale of agreement could be measured"}  # fmt: skip
+    statistic = best_distance / scale
+    return {
+        "reproduces": bool(statistic <= THRESHOLD),
+        "statistic": round(float(statistic), 3),
+        "threshold": THRESHOLD,
+        "method": METHOD,
+        "floor": floor,
+        "codec": codec,
+        "scale": scale,
+    }
+
+
+def assess_fit(
+    pipeline: Pipeline, params: dict[str, float], best_distance: float, target: Target,
+    noise_floor: dict[str, Any] | None, seed: int,
+) -> dict[str, Any]:  # fmt: skip
+    """The verdict on a refinement's best fit (see the module docstring)."""
+    floor = (noise_floor or {}).get("floor")
+    floor = float(floor) if floor is not None and np.isfinite(floor) else None
+    return verdict(best_distance, floor, codec_scale(pipeline, params, target, seed))
+
+
+def verdict_line(adequacy: dict[str, Any] | None) -> str | None:
+    """The printed sentence; ``None`` when the fit reproduces the target (or no verdict)."""
+    if not adequacy or adequacy.get("reproduces") is not False:
+        return None
+    return (
+        f"THE MODEL DOES NOT REPRODUCE THIS VIDEO: the best fit lies {adequacy['statistic']:.3g} times "
+        f"the scale of agreement from it (reproducing needs ≤ {adequacy['threshold']:g}); the numbers "
+        "it gives are unreliable. Run `physinfer diagnose` to find what the model lacks."
+    )

@@ -1,0 +1,134 @@
+"""The real-footage pendulum: looks do not decide the answer, phase is a nuisance reported
+apart, the period read from the video starts the search, the adequacy verdict, and the real
+clips of ../shared/realvideo (skipped where that folder is absent)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physinfer.errors import UserInputError
+from physinfer.testing import check_phenomenon
+from physinfer.types import Clip
+
+REAL = Path(__file__).resolve().parents[3].parent / "shared" / "realvideo"
+BIN = Path(sys.executable).parent / "physinfer"
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN), *args], capture_output=True, text=True, timeout=900)
+
+
+def real_clip(name: str) -> Path:
+    path = REAL / name
+    if not path.exists():
+        pytest.skip(f"real footage {path} is absent (it lives in ../shared/realvideo beside the checkout)")
+    return path
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    from physinfer.plugins import load_registry
+
+    registry, _ = load_registry()
+    phenomenon = registry.phenomenon("pendulum")
+    return registry, phenomenon
+
+
+def render(phenomenon, params, seconds=6.0, **zeta):
+    simulator = phenomenon.make_simulator([], duration_s=seconds)
+    renderer = phenomenon.make_renderer()
+    clip = renderer.render(simulator.simulate(params), zeta)
+    renderer.close()
+    return clip
+
+
+def distance(embedder, a: Clip, b: Clip) -> float:
+    return float(np.sum((embedder.embed(a) - embedder.embed(b)) ** 2))
+
+
+def test_the_pendulum_satisfies_the_contracts(pendulum):
+    registry, phenomenon = pendulum
+    check_phenomenon(phenomenon, registry.embedder(phenomenon.default_embedder))
+    assert phenomenon.nuisance == ("phase",) and phenomenon.duration_from_target
+
+
+def test_looks_and_phase_move_the_embedding_far_less_than_the_length(pendulum):
+    registry, phenomenon = pendulum
+    embedder = registry.embedder("motion")
+    base = {"length": 0.5, "damping": 0.05, "amplitude": 15.0, "phase": 0.0}
+    reference = render(phenomenon, base)
+    looks = [
+        render(phenomenon, base, bob_hue=0.6, wall=0.3, light=9.0),
+        render(phenomenon, base, elevation_deg=15.0, fill=0.3, size=96),
+        render(phenomenon, {**base, "phase": 0.55}),
+    ]
+    other_length = render(phenomenon, {**base, "length": 0.56})  # 12 % longer: 5.5 % in period
+    changed = distance(embedder, reference, other_length)
+    for clip in looks:
+        assert distance(embedder, reference, clip) < 0.2 * changed
+
+
+def test_a_pendulum_videos_period_gives_its_length_before_any_simulation(pendulum):
+    from physinfer_pendulum.estimate import video_estimate
+
+    _, phenomenon = pendulum
+    value, low, high = video_estimate(render(phenomenon, {"length": 0.8, "damping": 0.02, "amplitude": 10.0}, 8.0))["length"]
+    assert value == pytest.approx(0.8, rel=0.02) and low < 0.8 < high
+
+
+def test_a_clip_shorter_than_a_swing_is_refused_with_a_line(pendulum):
+    from physinfer_pendulum.estimate import video_estimate
+
+    _, phenomenon = pendulum
+    clip = render(phenomenon, {"length": 2.5, "damping": 0.0, "amplitude": 20.0, "phase": 0.05}, 1.2)
+    with pytest.raises(UserInputError, match="too short to see a full swing"):
+        video_estimate(clip)
+
+
+def test_two_things_moving_are_refused_naming_their_regions(pendulum):
+    from physinfer.tracking import check_one_mover
+
+    _, phenomenon = pendulum
+    clip = render(phenomenon, {"length": 0.5, "damping": 0.0, "amplitude": 15.0}, 4.0)
+    twice = Clip(np.concatenate([clip.frames, clip.frames[:, :, ::-1][::-1]], axis=2), clip.fps)
+    check_one_mover(clip)
+    with pytest.raises(UserInputError, match="2 things move.*--roi"):
+        check_one_mover(twice)
+
+
+def test_refine_reports_the_phase_apart_and_a_verdict_and_a_wrong_model_is_told(pendulum, tmp_path):
+    from physinfer.video import write_video
+
+    _, phenomenon = pendulum
+    target = write_video(
+        tmp_path / "swing.mp4", render(phenomenon, {"length": 0.7, "damping": 0.05, "amplitude": 12.0, "phase": 0.4}, 6.0)
+    )
+    good = cli("refine", "--plugin", "pendulum", "--target", str(target), "--out", str(tmp_path / "good"))
+    assert good.returncode == 0, good.stderr
+    assert "nuisance (what the video leaves open" in good.stderr
+    result = json.loads((tmp_path / "good" / "result.json").read_text())
+    assert result["best_params"]["length"] == pytest.approx(0.7, rel=0.03)
+    assert set(result["nuisance"]) == {"phase"} and "phase" not in result["at_bounds"]
+    assert result["adequacy"]["reproduces"] is True
+    wrong = cli("refine", "--plugin", "pendulum", "--target", str(target), "--steps", "6", "--fix", "length=1.5",
+                "--out", str(tmp_path / "wrong"))  # fmt: skip
+    assert wrong.returncode == 0, wrong.stderr
+    assert "DOES NOT REPRODUCE THIS VIDEO" in " ".join(wrong.stderr.split())
+    assert json.loads((tmp_path / "wrong" / "result.json").read_text())["adequacy"]["reproduces"] is False
+
+
+def test_the_real_ball_on_a_string_gives_its_length_within_3_percent(tmp_path):
+    video = real_clip("ball_on_string.mp4")
+    out = tmp_path / "ball"
+    done = cli("refine", "--plugin", "pendulum", "--target", str(video), "--out", str(out), "--json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads((out / "result.json").read_text())
+    truth = 9.81 * 1.02**2 / (4 * np.pi**2)  # the README's tracked period
+    assert result["best_params"]["length"] == pytest.approx(truth, rel=0.03)
+    assert result["adequacy"]["reproduces"] is True
