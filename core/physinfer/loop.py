@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.adequacy import assess_fit
 from physinfer.errors import UserInputError
 from physinfer.evaluation import (  # noqa: F401 - re-exported: the loop's evaluation API
     NON_FINITE,
@@ -326,10 +325,6 @@ def _run_refinement(
         result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
     if config.floor_samples:
         result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
-    if np.isfinite(result.best_distance):
-        result.extra["adequacy"] = assess_fit(
-            pipeline, result.best_params, result.best_distance, target, result.extra.get("noise_floor"), config.seed
-        )
     return result
 
 

@@ -12,6 +12,9 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from physinfer.adequacy import assess_fit
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.locking import exclusive_directory
@@ -90,8 +93,6 @@ def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict
     estimate_of = pipeline.phenomenon.video_estimate
     if estimate_of is None:
         return None
-    import numpy as np
-
     space = pipeline.simulator.parameter_space
     estimate = {k: v for k, v in estimate_of(target.clip).items() if k in space.names}
     if not estimate:
@@ -306,6 +307,10 @@ def refine(
             )
         from physinfer.video import write_video
 
+        if np.isfinite(result.best_distance):  # the refine command's verdict (diagnose has its own tests)
+            result.extra["adequacy"] = assess_fit(
+                pipeline, result.best_params, result.best_distance, target, result.extra.get("noise_floor"), seed
+            )
         if fixed_values:
             result.extra["fixed"] = fixed_values
         if scene is not None:
