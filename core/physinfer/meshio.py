@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.types import Trajectory
+from physinfer.types import FPS_RANGE, Trajectory
+from physinfer.types import check_fps as types_check_fps
 
 
 def load_trajectory(path: str | Path, fps: float | None = None) -> Trajectory:
@@ -55,6 +56,11 @@ def load_trajectory(path: str | Path, fps: float | None = None) -> Trajectory:
         trajectory = read_trajectory_npz(path)
         if fps is not None:
             trajectory = replace(trajectory, fps=float(fps))
+        elif math.isfinite(trajectory.fps) and not FPS_RANGE[0] <= trajectory.fps <= FPS_RANGE[1]:
+            raise UserInputError(  # a rate no video is written at: say so before rendering
+                f"{path} records {trajectory.fps:g} fps; give --fps from {FPS_RANGE[0]:g} to "
+                f"{FPS_RANGE[1]:g} to render it at another rate"
+            )
     else:
         raise UserInputError(
             f"trajectory {path} does not exist; give an .npz file or a folder of .obj files"
@@ -64,9 +70,8 @@ def load_trajectory(path: str | Path, fps: float | None = None) -> Trajectory:
 
 
 def check_fps(fps: float) -> None:
-    """Refuse a frame rate that is not a positive, finite number."""
-    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
-        raise UserInputError(f"--fps {fps}: give a positive frame rate in frames per second")
+    """Refuse a ``--fps`` that is not a frame rate from 0.1 to 1000 (:func:`physinfer.types.check_fps`)."""
+    types_check_fps(fps)
 
 
 def read_trajectory_npz(path: str | Path) -> Trajectory:

@@ -51,6 +51,26 @@ SettingsT = TypeVar("SettingsT", bound=Validated)
 Converter = Callable[[Any], Any]
 
 
+#: Seeds every command takes: numpy's legacy seeding, torch and the optimizers all accept these.
+SEED_RANGE = (0, 2**32 - 1)
+
+
+def check_seed(value: Any, option: str = "--seed") -> int:
+    """Refuse a seed that is not a whole number from 0 to 2**32 - 1 (numpy refuses others).
+
+    The one check of every command's seed: the CLI's error path runs it on each command's
+    ``seed`` (:func:`physinfer.cli.common.handle_errors`), the library on its options'
+    (:func:`physinfer.api.options.with_settings`).
+
+    Raises:
+        UserInputError: naming ``option``, the value and the range.
+    """
+    low, high = SEED_RANGE
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise UserInputError(f"{option} {value}: give a whole number from {low} to {high}")
+    return value
+
+
 def check_range(key: str, value: float, low: float, high: float) -> None:
     """Refuse a value outside ``[low, high]`` (or not finite).
 

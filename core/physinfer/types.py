@@ -14,6 +14,35 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 
+#: Frame rates a user may give (``--fps``) or a trajectory file may record: a video is written
+#: at these faithfully (below 0.1 fps the mp4 time base rounds to 0, and was written at 24).
+FPS_RANGE = (0.1, 1000.0)
+
+
+def check_fps(fps: Any, option: str = "--fps") -> float:
+    """Refuse a frame rate that is not a number from 0.1 to 1000 frames per second.
+
+    The one check of every frame rate a user gives (``render``, ``prepare``, ``refine``,
+    ``diagnose``, ``infer`` ``--fps``) or a trajectory file records.
+
+    Args:
+        fps: The value.
+        option: How it is named in the message (``"--fps"``, ``"t.npz records"``).
+
+    Raises:
+        UserInputError: not a positive finite number, or outside :data:`FPS_RANGE`.
+    """
+    low, high = FPS_RANGE
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise UserInputError(f"{option} {fps!r} is not a frame rate; give a positive number of frames per second") from None
+    if not (np.isfinite(value) and value > 0):
+        raise UserInputError(f"{option} {value:g} is not a frame rate; give a positive number of frames per second")
+    if not low <= value <= high:
+        raise UserInputError(f"{option} {value:g}: give a frame rate from {low:g} to {high:g} frames per second")
+    return value
+
 
 @dataclass(frozen=True)
 class Trajectory:

@@ -17,7 +17,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
-from physinfer.types import Clip
+from physinfer.types import FPS_RANGE, Clip, check_fps
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
@@ -55,8 +55,8 @@ def read_video(
     Raises:
         UserInputError: missing/unreadable file, no frames, unknown frame rate.
     """
-    if fps is not None and not (math.isfinite(fps) and fps > 0):  # given, so say it is wrong
-        raise UserInputError(f"--fps {fps:g} is not a frame rate; give a positive number of frames per second")
+    if fps is not None:  # given, so say it is wrong
+        fps = check_fps(fps)
     path = Path(path)
     if not path.exists():
         raise UserInputError(f"video {path} does not exist; check the path")
@@ -312,6 +312,8 @@ def write_video(
         frames, fps = frames.frames, frames.fps if fps is None else fps
     if fps is None:
         raise ValueError("fps is required")
+    if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:  # mp4's time base would round it (to 24 fps)
+        raise ValueError(f"cannot write {fps:g} fps: videos are written at {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} fps")
     path = Path(path)
     frames = _to_rgb(np.asarray(frames))
     suffix = path.suffix.lower()

@@ -224,7 +224,7 @@ def test_bad_trajectories_are_refused_with_one_line(tmp_path, case):
 
 def test_a_frame_rate_that_is_not_positive_is_refused(flag_run):
     for fps in (0, -1.0, float("nan"), float("inf")):
-        with pytest.raises(UserInputError, match="give a positive frame rate"):
+        with pytest.raises(UserInputError, match="is not a frame rate; give a positive number"):
             load_trajectory(flag_run / "t.npz", fps=fps)
     proc = run_cli(
         "render",
@@ -239,7 +239,7 @@ def test_a_frame_rate_that_is_not_positive_is_refused(flag_run):
         "--json",
     )
     assert (
-        proc.returncode == 2 and "--fps nan: give a positive frame rate" in json_out(proc)["error"]
+        proc.returncode == 2 and "--fps nan is not a frame rate" in json_out(proc)["error"]
     )
 
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from physinfer.api.options import PrepareOptions, RenderOptions, required, with_settings
 from physinfer.errors import UserInputError
-from physinfer.types import Clip
+from physinfer.types import Clip, check_fps
 
 
 @dataclass
@@ -205,8 +205,8 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
 
     Raises:
         UserInputError: a missing or malformed trajectory (varying vertex counts, missing
-            frames, object arrays), an OBJ folder without ``fps``, a bad ζ or scene, an
-            ``out`` that is not a video name.
+            frames, object arrays), an OBJ folder without ``fps``, an ``fps`` (given or
+            recorded) outside 0.1-1000, a bad ζ or scene, an ``out`` that is not a video name.
     """
     from physinfer.api.plugins import registry
     from physinfer.meshio import load_trajectory
@@ -214,6 +214,8 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
 
     o = with_settings(RenderOptions, options, settings)
     trajectory = required(o.trajectory, "trajectory", "a trajectory NPZ or a folder of .obj meshes")
+    if o.fps is not None:  # 0.1-1000 fps, before the renderer is made
+        check_fps(o.fps)
     out = None if o.out is None else Path(o.out)
     if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")

@@ -370,9 +370,11 @@ def with_settings(
     """``options`` (default: ``kind()``) with ``settings`` replacing its fields.
 
     Raises:
-        UserInputError: an options object of another command, or a setting ``kind`` lacks
-            (naming the closest one).
+        UserInputError: an options object of another command, a setting ``kind`` lacks
+            (naming the closest one), or a ``seed`` outside 0..2**32-1.
     """
+    from physinfer.settings import check_seed
+
     base = kind() if options is None else options
     if not isinstance(base, kind):
         raise UserInputError(f"options: expected {kind.__name__}, got {type(base).__name__}")
@@ -382,7 +384,10 @@ def with_settings(
             close = difflib.get_close_matches(name, names, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise UserInputError(f"{kind.__name__} has no setting {name!r}{hint}")
-    return dataclasses.replace(base, **settings)
+    merged = dataclasses.replace(base, **settings)
+    if "seed" in names:  # as the CLI checks every command's --seed
+        check_seed(merged.seed)  # type: ignore[attr-defined]
+    return merged
 
 
 def as_assignments(value: Assignments, what: str) -> tuple[str, ...]:

@@ -56,7 +56,9 @@ def handle_errors(
     A user error (:class:`UserInputError`, :class:`PhysinferError`) is one clear line and
     exit status 2; any other exception is one line naming it and a saved traceback, exit
     status 1 (:func:`report_internal_error`). With ``--json`` either prints one
-    ``{"error": ...}`` object on stdout.
+    ``{"error": ...}`` object on stdout. A command's ``seed`` (``--seed``) is checked here,
+    before the command runs, for every command alike, plugins' included
+    (:func:`physinfer.settings.check_seed`).
 
     Args:
         as_json_param: The command's keyword argument that is ``--json``.
@@ -68,6 +70,10 @@ def handle_errors(
         def wrapper(*args: Any, **kwargs: Any) -> Any:
             as_json = bool(kwargs.get(as_json_param))
             try:
+                if "seed" in kwargs:
+                    from physinfer.settings import check_seed
+
+                    check_seed(kwargs["seed"])
                 return func(*args, **kwargs)
             except (UserInputError, PhysinferError) as exc:
                 err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
