@@ -103,7 +103,7 @@ posterior: install
 		--frames 60 --size 224 --seed 21 --out runs/flag-posterior
 	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior --device cpu --seed 0 \
 		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
-		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors
+		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors --overwrite
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior --device cpu \
 		--out runs/flag-posterior-calibration
 
@@ -116,7 +116,7 @@ posterior-sizes: install
 		--out runs/flag-posterior-sizes
 	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior-sizes --device cpu --seed 0 \
 		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
-		--out plugins/flag/physinfer_flag/data/posterior_sizes.safetensors
+		--out plugins/flag/physinfer_flag/data/posterior_sizes.safetensors --overwrite
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior-sizes --device cpu \
 		--posterior plugins/flag/physinfer_flag/data/posterior_sizes.safetensors \
 		--out runs/flag-posterior-sizes-calibration

@@ -55,7 +55,8 @@ def simulate_videos(speeds: Sequence[float], workdir: Path) -> list[Path]:
     videos = []
     for speed in speeds:
         out = workdir / f"flag_wind_{speed:g}.mp4"
-        args = [*command, "simulate", "--plugin", "flag", "--set", f"wind_speed={speed:g}", "--out", str(out)]
+        args = [*command, "simulate", "--plugin", "flag", "--set", f"wind_speed={speed:g}", "--out", str(out),
+                "--overwrite"]  # its own videos, made again on each run
         print("running:", " ".join(args), file=sys.stderr)
         subprocess.run(args, check=True, stdout=sys.stderr)
         videos.append(out)

@@ -39,6 +39,60 @@ def check_output_dir(path: str | Path, option: str = "--out") -> None:
         raise UserInputError(f"{option} {path}: no permission to write in {existing}; choose another {option}")
 
 
+def check_output_file(
+    path: str | Path,
+    option: str = "--out",
+    *,
+    overwrite: bool = False,
+    suffixes: tuple[str, ...] = (),
+    what: str = "the file",
+    shown: str | None = None,
+) -> Path:
+    """Refuse an output file before any work: one the user has, or one that cannot be written.
+
+    Nothing is made: ``path`` and the folders above it may not exist yet. The closest existing
+    folder above it is tried with a temporary file, made and removed at once, so a place no one
+    can write (``/proc``, a read-only mount, a folder without permission) is found even by root.
+
+    Args:
+        path: The file a command will write (atomically, :func:`atomic_path`).
+        option: The option that named it, for messages.
+        overwrite: Whether an existing file may be replaced (the command's ``--overwrite``).
+        suffixes: Endings the name must have (lower case; empty: any).
+        what: What the file is, for the suffix message (``"the trajectory file"``).
+        shown: How the path is named in messages (default ``"OPTION PATH"``).
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        UserInputError: a wrong ending, a directory, an existing file without ``overwrite``, a
+            file above it, or a folder that cannot be written.
+    """
+    from physinfer.errors import UserInputError
+
+    path = Path(path)
+    shown = shown or f"{option} {path}"
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise UserInputError(f"{shown}: name {what} " + " or ".join(f"*{s}" for s in suffixes))
+    if path.is_dir():
+        raise UserInputError(f"{shown} is a directory; give a file name")
+    if path.exists() and not overwrite:
+        raise UserInputError(f"{shown} exists; give --overwrite to replace it, or another name")
+    folder = next(p for p in path.parents if p.exists() or p == p.parent)
+    if not folder.is_dir():
+        raise UserInputError(f"{shown}: {folder} is a file, so nothing can be written under it")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".physinfer-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise UserInputError(
+            f"{shown}: cannot write in {folder} ({exc.strerror or exc}); choose another {option}"
+        ) from None
+    return path
+
+
 @contextmanager
 def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it replaces ``path`` atomically.

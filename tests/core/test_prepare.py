@@ -163,7 +163,8 @@ def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_pa
     for index, frame in enumerate(still_camera.frames[:3]):
         Image.fromarray(frame).save(frames / f"{index:03d}.png")
     proc = subprocess.run(
-        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(frames), "--out", str(out), "--json"],
+        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(frames), "--out", str(out), "--overwrite",
+         "--json"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert proc.returncode == 2 and "pass it with --fps" in json.loads(proc.stdout)["error"]

@@ -97,10 +97,12 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
         plugin: The phenomenon.
         options: All settings at once; ``settings`` replace its fields.
         **settings: Fields of :class:`SimulateOptions` (``set``, ``effects``, ``render_set``,
-            ``seed``, ``duration``, ``out``, ``trajectory_out``, ...).
+            ``seed``, ``duration``, ``out``, ``trajectory_out``, ``overwrite``, ...).
 
     Raises:
-        UserInputError: an unknown parameter, render setting or effect; a bad output path.
+        UserInputError: an unknown parameter, render setting or effect; a bad output path
+            (an existing file without ``overwrite``, a ``trajectory_out`` not ``*.npz``, a
+            folder that cannot be written), refused before anything is simulated.
     """
     from physinfer.parameters import parse_float_assignments
     from physinfer.pipeline import build_pipeline, naming_effects
@@ -109,7 +111,7 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
     o = with_settings(SimulateOptions, options, settings)
     effects = as_names(o.effects, "effects")
     out, trajectory_out = _optional(o.out), _optional(o.trajectory_out)
-    _check_simulate_outputs(out, trajectory_out)
+    _check_simulate_outputs(out, trajectory_out, overwrite=o.overwrite)
     pipeline = build_pipeline(
         registry(), plugin, effects=effects, embedder="", duration_s=o.duration, scene_set=o.scene_set
     )
@@ -146,12 +148,22 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
     return sim
 
 
-def _check_simulate_outputs(out: Path | None, trajectory_out: Path | None) -> None:
-    if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
-        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
-    for option, path in (("--out", out), ("--trajectory-out", trajectory_out)):
-        if path is not None and path.is_dir():
-            raise UserInputError(f"{option} {path} is a directory; give a file name")
+def _check_simulate_outputs(
+    out: Path | None, trajectory_out: Path | None, *, overwrite: bool
+) -> None:
+    """Refuse outputs ``simulate`` must not write, before it simulates (two names for one
+    file cannot pass: one must end ``.mp4``/``.gif``, the other ``.npz``)."""
+    from physinfer.io import check_output_file
+
+    if out is not None:
+        if out.suffix.lower() not in (".mp4", ".gif"):
+            raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+        check_output_file(out, "--out", overwrite=overwrite)
+    if trajectory_out is not None:
+        check_output_file(
+            trajectory_out, "--trajectory-out", overwrite=overwrite, suffixes=(".npz",),
+            what="the trajectory file",
+        )  # fmt: skip
 
 
 def refine(
@@ -351,18 +363,24 @@ def train_posterior(
         options: All settings at once; ``settings`` replace its fields.
         progress: ``True`` for rich bars on stderr (embedding, training), or a callable
             ``(stage, done, total)``.
-        **settings: Fields of :class:`PosteriorTrainOptions` (``data`` and ``out`` are needed).
+        **settings: Fields of :class:`PosteriorTrainOptions` (``data`` and ``out`` are needed;
+            an existing ``out`` is replaced only with ``overwrite``).
 
     Returns:
         The :class:`~physinfer.posterior.train_workflow.TrainResult`: ``estimator``, ``path``,
         ``to_dict()`` and ``plot()`` (the validation loss per epoch).
     """
+    from physinfer.io import check_output_file
     from physinfer.posterior.estimator import NetworkConfig
     from physinfer.posterior.train_workflow import train_posterior as run
 
     o = with_settings(PosteriorTrainOptions, options, settings)
     data = required(o.data, "data", "the dataset directory (physinfer dataset generate)")
     out = required(o.out, "out", "the estimator file to write (*.safetensors)")
+    # Before the embedding and training (minutes to hours): the user's weights stay theirs.
+    check_output_file(
+        out, "--out", overwrite=o.overwrite, suffixes=(".safetensors",), what="the estimator file"
+    )
     network = NetworkConfig(
         density=o.density, max_epochs=o.max_epochs, stop_after_epochs=o.patience, ensemble=o.ensemble
     )

@@ -75,7 +75,9 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
     Raises:
         UserInputError: a missing or unreadable video, a bad ``roi`` or trim, a video in
             which no moving subject is found (the message names the ``roi`` way out), an
-            ``out`` that is not a video name or would overwrite ``target``.
+            ``out`` that is not a video name or would overwrite ``target``, or whose video,
+            JSON or overlay exists already (without ``overwrite``; checked before anything
+            is read).
     """
     from physinfer.api.plugins import registry
     from physinfer.conditioning import parse_roi
@@ -84,7 +86,7 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
 
     o = with_settings(PrepareOptions, options, settings)
     target = required(o.target, "target", "the video to prepare")
-    paths = None if o.out is None else output_paths(Path(o.out), target)
+    paths = None if o.out is None else output_paths(Path(o.out), target, overwrite=o.overwrite)
     roi = parse_roi(o.roi) if isinstance(o.roi, str) else o.roi
     # Settings are checked before the embedder (and torch) loads: a typo should cost nothing.
     prepare_settings = PrepareSettings(
@@ -127,8 +129,14 @@ def _write_prepared(video: PreparedVideo, paths: dict[str, Path]) -> None:
     atomic_write_json(paths["json"], video.to_dict())
 
 
-def output_paths(out: Path, target: Path) -> dict[str, Path]:
-    """The video, JSON and overlay paths of ``out``; refuses a bad or clobbering ``out``."""
+def output_paths(out: Path, target: Path, *, overwrite: bool = False) -> dict[str, Path]:
+    """The video, JSON and overlay paths of ``out``; refuses a bad or clobbering ``out``.
+
+    ``target`` is never written over; an existing video, JSON or overlay is replaced only with
+    ``overwrite``; a folder that cannot be written is refused (:func:`check_output_file`).
+    """
+    from physinfer.io import check_output_file
+
     if out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
     paths = {
@@ -143,6 +151,9 @@ def output_paths(out: Path, target: Path) -> dict[str, Path]:
             raise UserInputError(
                 f"--out: writing {path} would overwrite --target; choose another name"
             )
+    for path in paths.values():
+        shown = f"--out {out}" if path == out else f"--out {out}: {path}"
+        check_output_file(path, "--out", overwrite=overwrite, shown=shown)
     return paths
 
 

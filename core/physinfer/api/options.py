@@ -126,13 +126,16 @@ class SimulateOptions(ModelOptions):
     Attributes:
         set: Parameter values ``{NAME: VALUE}`` (the rest take their defaults).
         out: Video to write (``.mp4``/``.gif``); ``None``: none.
-        trajectory_out: Trajectory NPZ to write; ``None``: none.
+        trajectory_out: Trajectory NPZ to write (``.npz``); ``None``: none.
+        overwrite: Replace ``out`` and ``trajectory_out`` when they exist (by default an
+            existing file is refused before anything is simulated).
         render: Render the clip (``False``: the trajectory only).
     """
 
     set: Assignments = field(default_factory=dict)
     out: Path | None = None
     trajectory_out: Path | None = None
+    overwrite: bool = False
     render: bool = True
 
 
@@ -242,7 +245,9 @@ class PosteriorTrainOptions:
 
     Attributes:
         data: Dataset directory from ``physinfer dataset generate`` (θ stored with the clips).
-        out: Estimator file to write (``*.safetensors``; a JSON config is written beside it).
+        out: Estimator file to write (``*.safetensors``; its configuration is stored inside).
+        overwrite: Replace ``out`` when it exists (by default an existing file is refused
+            before anything is embedded or trained).
         embedder: Embedder (``None``: the phenomenon's default).
         embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
         weights: Embedder weights file (``None``: the shipped default).
@@ -258,6 +263,7 @@ class PosteriorTrainOptions:
 
     data: Path | None = None
     out: Path | None = None
+    overwrite: bool = False
     embedder: str | None = None
     embedder_frames: int | None = None
     weights: Path | None = None
@@ -302,6 +308,8 @@ class PrepareOptions:
         target: Video to prepare (mp4/mov/..., gif or an image folder).
         out: Prepared video (``.mp4``/``.gif``); ``NAME.json`` and ``NAME_overlay.png`` go
             beside it (``None``: nothing written; the prepared clip is returned).
+        overwrite: Replace ``out``, ``NAME.json`` and ``NAME_overlay.png`` when they exist (by
+            default any of them existing is refused before the video is read).
         roi: ``"x,y,w,h"`` or four numbers in the input's pixels: the region the subject
             moves in, instead of the one found.
         fps: Frame rate of ``target`` when the file does not say.
@@ -318,6 +326,7 @@ class PrepareOptions:
 
     target: Path | None = None
     out: Path | None = None
+    overwrite: bool = False
     roi: str | tuple[float, float, float, float] | None = None
     fps: float | None = None
     embedder: str | None = None

@@ -52,6 +52,14 @@ def train_cmd(
         Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")
     ],
     out: Annotated[Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")],
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace --out when it exists (by default an existing file is refused before "
+            "anything is embedded or trained).",
+        ),
+    ] = False,
     embedder: Annotated[
         str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")
     ] = None,

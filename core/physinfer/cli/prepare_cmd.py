@@ -30,6 +30,14 @@ def prepare_cmd(
             help="Prepared video (.mp4 or .gif); NAME.json and NAME_overlay.png go beside it.",
         ),
     ],
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace --out, NAME.json and NAME_overlay.png when they exist (by default any "
+            "of them existing is refused before the video is read).",
+        ),
+    ] = False,
     roi: Annotated[
         str | None,
         typer.Option(

@@ -39,8 +39,16 @@ def simulate_cmd(
         Path | None, typer.Option("--out", help="Video to write (.mp4 or .gif).")
     ] = None,
     trajectory_out: Annotated[
-        Path | None, typer.Option("--trajectory-out", help="Trajectory NPZ to write.")
+        Path | None, typer.Option("--trajectory-out", help="Trajectory to write (*.npz).")
     ] = None,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace --out and --trajectory-out when they exist (by default an existing file "
+            "is refused before anything is simulated).",
+        ),
+    ] = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Run one simulation and render it to a video (and/or save the trajectory)."""
