@@ -17,7 +17,7 @@ def test_entry_points_load_builtins_and_example():
 
 
 def test_disabled_plugins_env(monkeypatch):
-    monkeypatch.setenv("PHYSINFER_DISABLED_PLUGINS", "pendulum, cma_missing")
+    monkeypatch.setenv("PHYSINFER_DISABLED_PLUGINS", "pendulum_lab, cma_missing")
     registry, infos = load_registry()
     assert "pendulum_lab" not in registry.entries["phenomena"]
     assert "pendulum_lab" not in infos
