@@ -87,7 +87,30 @@ def frame_clip(phenomenon: Any, embedder: Any, clip: Clip, roi: Box | None) -> t
     fps = float(embedder.fps) if embedder is not None else None
     settings = PrepareSettings(size=size, fps=fps, roi=roi)
     prepared = prepare_clip(clip, framing=phenomenon.framing or default_framing, settings=settings)
-    return prepared.clip, prepared.to_dict()
+    record = prepared.to_dict()
+    if roi is not None and getattr(embedder, "compares_roi_only", False):
+        return outside_frozen(prepared.clip, roi, record["square"]), {**record, "outside_roi": "frozen"}
+    return prepared.clip, record
+
+
+def outside_frozen(clip: Clip, roi: Box, square: Box) -> Clip:
+    """``clip`` (framed from ``square``) with the pixels outside ``roi`` (both in the input
+    video's pixels) held at their temporal median: nothing outside the given region moves.
+
+    The framing's square extends past the region the user gave (a margin, a square shape),
+    and whatever moves there (a flickering dial beside a pendulum) would be compared too.
+    """
+    import numpy as np
+
+    frames = clip.frames.copy()
+    height, width = frames.shape[1:3]
+    x0, y0, side = square[0], square[1], square[2]
+    left, right = (np.array([roi[0], roi[0] + roi[2]]) - x0) * width / side
+    top, bottom = (np.array([roi[1], roi[1] + roi[3]]) - y0) * height / side
+    inside = np.zeros((height, width), bool)
+    inside[max(0, int(np.floor(top))) : int(np.ceil(bottom)), max(0, int(np.floor(left))) : int(np.ceil(right))] = True
+    frames[:, ~inside] = np.median(frames[:, ~inside], axis=0).astype(frames.dtype)
+    return Clip(frames, clip.fps)
 
 
 def freeze_background(clip: Clip) -> tuple[Clip, dict[str, Any]]:

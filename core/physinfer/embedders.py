@@ -148,6 +148,11 @@ class MotionSpectrumConfig:
             narrow ones place a frequency precisely, the broad ones keep the distance falling
             towards it from far away (an optimizer finds the basin).
         n_segments: Consecutive segments whose swing amplitude is kept (the decay).
+        n_times: Samples of the path itself (along and across the swing), kept for short
+            clips: a clip of about one swing has a spectrum as wide as its frequency, but its
+            path still fixes the period once the phase (a nuisance) is searched.
+        short_s: Clips up to this long keep the path at full weight; the weight falls to 0 at
+            twice this (a long clip's path would make the distance rugged in the period).
     """
 
     fps: float = 20.0
@@ -159,6 +164,8 @@ class MotionSpectrumConfig:
     n_freqs: int = 72
     widths: tuple[float, ...] = (0.03, 0.1, 0.3)
     n_segments: int = 4
+    n_times: int = 40
+    short_s: float = 4.0
 
     def validate(self) -> None:
         """Raise :class:`ValueError` on inconsistent settings."""
@@ -234,8 +241,9 @@ class MotionSpectrumEmbedder(Embedder):
         self.fps, self.n_frames, self.size = self.config.fps, self.config.n_frames, self.config.size
         self._grid = np.geomspace(self.config.f_min, self.config.f_max, self.config.n_freqs)
 
-    def track(self, clip: Clip):  # noqa: ANN201 - MotionTrack, imported lazily
-        """The subject's path in ``clip`` at the embedder's frame rate and length."""
+    def track(self, clip: Clip, *, allow_shift: bool = False):  # noqa: ANN201 - MotionTrack, imported lazily
+        """The subject's path in ``clip`` at the embedder's frame rate and length
+        (``allow_shift``: see :func:`physinfer.tracking.track_motion`)."""
         from physinfer.tracking import track_motion
         from physinfer.video import resample
 
@@ -246,12 +254,16 @@ class MotionSpectrumEmbedder(Embedder):
                 f"the clip is too short: {clip.n_frames / c.fps:.2f} s; the motion embedder needs at least "
                 f"{c.n_frames / c.fps:.2f} s"
             )
-        return track_motion(Clip(clip.frames[: int(round(c.max_seconds * c.fps))], c.fps))
+        return track_motion(Clip(clip.frames[: int(round(c.max_seconds * c.fps))], c.fps), allow_shift=allow_shift)
+
+    #: ``--roi`` means "compare only this region": conditioning freezes the pixels outside it.
+    compares_roi_only = True
 
     def embed(self, clip: Clip) -> np.ndarray:
-        """Embed a clip; returns ``(2 · len(widths) · n_freqs + n_segments,)`` float32."""
+        """Embed a clip; returns ``(2 · len(widths) · n_freqs + n_segments + 2 · n_times,)`` float32."""
         c = self.config
-        u, v, _ = self.track(clip).axes()
+        track = self.track(clip)
+        u, v, _ = track.axes()
         scale = float(np.sqrt(np.mean(u**2)))
         if scale < 1e-6:
             raise UserInputError("the tracked subject does not move")
@@ -259,5 +271,8 @@ class MotionSpectrumEmbedder(Embedder):
         spectra /= spectra[:, :1].sum(axis=-1, keepdims=True)  # u's spectrum sums to 1 at each width
         segments = np.array_split(u, c.n_segments)
         envelope = np.array([np.sqrt(np.mean(s**2)) for s in segments]) / scale
+        weight = float(np.clip(2.0 - track.duration_s / c.short_s, 0.0, 1.0))
+        times = np.linspace(0, len(u) - 1, c.n_times)
+        path = np.concatenate([np.interp(times, np.arange(len(u)), x) for x in (u, v)]) / scale
         # Amplitudes, not powers (as grid_spectrum): distances grow about linearly with differences.
-        return np.concatenate([np.sqrt(spectra).ravel() * 3.0, envelope]).astype(np.float32)
+        return np.concatenate([np.sqrt(spectra).ravel() * 3.0, envelope, weight * path]).astype(np.float32)

@@ -315,7 +315,7 @@ def _run_refinement(
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem
-    nuisance = [name for name in pipeline.phenomenon.nuisance if name in result.best_params]
+    nuisance = [name for name in getattr(pipeline.phenomenon, "nuisance", ()) if name in result.best_params]
     if nuisance:  # reported apart; a bound of a nuisance (a phase of 0 or 1 cycle) says nothing
         result.extra["nuisance"] = {name: result.best_params[name] for name in nuisance}
     result.extra["at_bounds"] = {

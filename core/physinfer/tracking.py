@@ -11,7 +11,8 @@ against grey), but not in how the subject moves. This module reduces a clip to t
   changes in place (a flickering dial, a lamp, a screen): such pixels are dropped, so the
   track follows what travels;
 - the track is the difference-weighted centroid of the remaining foreground per frame, in
-  the clip's pixels, and its principal axes (the swing and across it).
+  the clip's pixels, and its principal axes (the swing and across it); a swing smaller than
+  the subject (whose centroid would move at twice the frequency) is tracked by image shift.
 
 numpy and scipy only; a 25-s 550×310 phone clip takes about 2 s.
 """
@@ -35,6 +36,9 @@ MAX_OCCUPANCY = 0.6
 THRESHOLD_SPREADS = 6.0
 #: ...and at least this much (sum over RGB, of 765).
 MIN_THRESHOLD = 24.0
+#: A path seen by image shift at this ratio of the centroid's frequency (about half) means the
+#: centroid saw two crescents (a swing smaller than the subject): the shift path is used.
+DOUBLED = (0.4, 0.6)
 #: Share of frames that may lack a foreground (filled by interpolation) before tracking fails.
 MAX_LOST = 0.25
 #: A region of the motion-energy map counts as a mover when it holds this share of all motion.
@@ -53,6 +57,9 @@ class MotionTrack:
         area: ``(T,)`` foreground pixels per frame (in the reduced frames).
         lost: Frames without foreground (their centroid interpolated).
         frame_size: ``(height, width)`` of the clip.
+        method: ``"centroid"`` (the foreground's centroid) or ``"shift"`` (first-order image
+            shift, for a swing smaller than the subject; its size and curvature are not the
+            path's).
     """
 
     xy: np.ndarray
@@ -60,6 +67,7 @@ class MotionTrack:
     area: np.ndarray
     lost: int
     frame_size: tuple[int, int]
+    method: str = "centroid"
 
     @property
     def duration_s(self) -> float:
@@ -105,9 +113,35 @@ def foreground(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     spread = 1.4826 * float(np.median(np.abs(sample - centre)))
     threshold = max(centre + THRESHOLD_SPREADS * spread, MIN_THRESHOLD)
     mask = difference > threshold
-    occupancy = mask.mean(axis=0)
-    mask &= occupancy <= MAX_OCCUPANCY
+    mask &= mask.mean(axis=0) <= MAX_OCCUPANCY
     return mask, difference, threshold
+
+
+def peak_frequency(signal: np.ndarray, fps: float) -> float:
+    """The strongest frequency (Hz) of a signal (Hann window, zero-padded FFT)."""
+    n = len(signal)
+    power = np.abs(np.fft.rfft((signal - signal.mean()) * np.hanning(n), max(4096, 8 * n))) ** 2
+    return float(np.argmax(power[1:]) + 1) * fps / max(4096, 8 * n)
+
+
+def principal(path: np.ndarray) -> np.ndarray:
+    """A ``(T, 2)`` path along its direction of largest motion, ``(T,)``."""
+    centred = path - path.mean(axis=0)
+    return centred @ np.linalg.svd(centred, full_matrices=False)[2][0]
+
+
+def small_motion_path(frames: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """Displacement ``(T, 2)`` (x, y, reduced pixels) of what moves in ``region``, for motion
+    smaller than the subject: each frame differs from the mean image by about
+    ``-d · ∇mean`` (a first-order image shift), solved for ``d`` by least squares."""
+    from scipy import ndimage
+
+    grey = frames.mean(axis=-1)
+    mean = ndimage.gaussian_filter(grey.mean(axis=0), 1.0)
+    gy, gx = np.gradient(mean)
+    g = np.stack([gx[region], gy[region]], axis=1)  # (P, 2)
+    residual = ndimage.gaussian_filter(grey, (0, 1.0, 1.0))[:, region] - mean[region]  # (T, P)
+    return -np.linalg.lstsq(g, residual.T, rcond=None)[0].T
 
 
 def moving_regions(clip: Clip, *, side: int = TRACK_SIDE) -> list[dict[str, object]]:
@@ -169,8 +203,13 @@ def half_swings(u: np.ndarray, fps: float) -> tuple[int, float | None]:
     return len(kept), float(np.mean(np.diff(kept)))
 
 
-def track_motion(clip: Clip, *, side: int = TRACK_SIDE) -> MotionTrack:
+def track_motion(clip: Clip, *, side: int = TRACK_SIDE, allow_shift: bool = False) -> MotionTrack:
     """The centroid path of what moves in ``clip``.
+
+    ``allow_shift``: where the centroid's frequency is twice the image shift's (a swing
+    smaller than the subject), return the shift path instead. The choice is a jump, so an
+    embedding (which must vary smoothly with θ) leaves it off; a one-off reading of the
+    period (a phenomenon's ``video_estimate``) turns it on.
 
     Raises:
         UserInputError: nothing moves, or the subject is lost in more than a quarter of
@@ -197,5 +236,16 @@ def track_motion(clip: Clip, *, side: int = TRACK_SIDE) -> MotionTrack:
     if lost:
         cx = np.interp(t, t[found], cx[found])
         cy = np.interp(t, t[found], cy[found])
+    method = "centroid"
+    if allow_shift:
+        # A subject that swings less than its own size covers the middle of its path all the
+        # time: the median background holds it, the foreground is two crescents, and their
+        # centroid moves at twice the frequency. The first-order image shift sees the true path.
+        from scipy import ndimage
+
+        shift = small_motion_path(frames, ndimage.binary_dilation(mask.any(axis=0), iterations=3))
+        centroid_f = peak_frequency(principal(np.stack([cx, cy], axis=1)), clip.fps)
+        if centroid_f > 0 and DOUBLED[0] <= peak_frequency(principal(shift), clip.fps) / centroid_f <= DOUBLED[1]:
+            cx, cy, method = cx.mean() + shift[:, 0], cy.mean() + shift[:, 1], "shift"
     xy = (np.stack([cx, cy], axis=1) + 0.5) * stride - 0.5
-    return MotionTrack(xy, float(clip.fps), mask.sum(axis=(1, 2)), lost, tuple(clip.frames.shape[1:3]))
+    return MotionTrack(xy, float(clip.fps), mask.sum(axis=(1, 2)), lost, tuple(clip.frames.shape[1:3]), method)

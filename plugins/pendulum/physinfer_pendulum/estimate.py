@@ -1,7 +1,10 @@
 """What a pendulum video tells before any simulation: its period, hence its length.
 
-The tracked path's dominant frequency ``f`` (zero-padded spectrum, parabolic peak) gives the
-small-angle length ``L₀ = g / (2π f)²``. A larger swing has a longer period, so the true
+The tracked path's frequency ``f`` gives the small-angle length ``L₀ = g / (2π f)²``. It is
+read by fitting a damped sinusoid to the path (a grid of frequencies around the spectrum's
+peak, the amplitude, phase, decay and offset solved by least squares at each): the same as
+the spectral peak on a long clip, and still right on a clip of about one swing, where the
+spectrum's peak is as wide as the frequency itself. A larger swing has a longer period, so the true
 length lies between ``L₀`` over the period factor of the largest amplitude in θ's range and
 a little above ``L₀``: :func:`video_estimate` returns that interval as the search box.
 """
@@ -13,8 +16,14 @@ import numpy as np
 from physinfer.types import Clip
 
 G = 9.81
-#: Relative slack on both ends of the length box (the frequency read from a few swings).
-SLACK = 0.06
+#: Relative uncertainty of a frequency read from one cycle (it shrinks with the cycles seen),
+#: and its floor and ceiling: the length box spans (1 ± slack)² around the estimate.
+SLACK_ONE_CYCLE, SLACK_MIN, SLACK_MAX = 0.3, 0.03, 0.5
+#: The amplitude read from the arc's curvature is searched within this factor either way
+#: (camera tilt foreshortens the rise; a visible string pulls the centroid towards the pivot).
+ANGLE_FACTOR = 1.8
+#: Where the search starts for a swing smaller than the bob (its curvature unreadable).
+SMALL_SWING_DEG = 5.0
 
 
 def period_factor(amplitude_deg: float) -> float:
@@ -35,21 +44,81 @@ def dominant_frequency(u: np.ndarray, fps: float) -> float:
     return float(k * fps / n_fft)
 
 
+def _fit(signal: np.ndarray, t: np.ndarray, frequency: float, rate: float) -> tuple[float, np.ndarray]:
+    """Least-squares fit of a decaying sinusoid with offset and drift: (residual, coefficients)."""
+    envelope = np.exp(-rate * t)
+    basis = np.stack([envelope * np.cos(2 * np.pi * frequency * t), envelope * np.sin(2 * np.pi * frequency * t),
+                      np.ones_like(t), t], axis=1)  # fmt: skip
+    coef, *_ = np.linalg.lstsq(basis, signal, rcond=None)
+    return float(np.sum((basis @ coef - signal) ** 2)), coef
+
+
+def fitted_swing(u: np.ndarray, fps: float) -> tuple[float, float, float, float]:
+    """The damped sinusoid that fits ``u`` best: ``(frequency Hz, decay rate 1/s, amplitude,
+    phase in cycles)``, where ``u ≈ amplitude · e^(-rate t) · cos(2π (f t + phase))``."""
+    t = np.arange(len(u)) / fps
+    duration = len(u) / fps
+    peak = dominant_frequency(u, fps)
+    low = max(0.3 / duration, 0.5 * peak, 0.05)
+    best = (np.inf, peak, 0.0, np.zeros(4))
+    for rate in (0.0, 0.1, 0.3, 1.0):
+        for f in np.geomspace(low, min(2.0 * peak, fps / 2.5), 400):
+            residual, coef = _fit(u, t, f, rate)
+            if residual < best[0]:
+                best = (residual, f, rate, coef)
+    _, frequency, rate, (a, b, _, _) = best
+    # a cos + b sin = A cos(ωt - δ), δ = atan2(b, a); cos(ωt + 2π phase) gives phase = -δ / 2π.
+    return float(frequency), float(rate), float(np.hypot(a, b)), float((-np.arctan2(b, a) / (2 * np.pi)) % 1.0)
+
+
+def fitted_frequency(u: np.ndarray, fps: float) -> float:
+    """The frequency (Hz) of the damped sinusoid that fits ``u`` best (least squares)."""
+    return fitted_swing(u, fps)[0]
+
+
+def swing_angle(u: np.ndarray, v: np.ndarray, fps: float, frequency: float, rate: float) -> float:
+    """The swing's angular amplitude (degrees) from the arc's curvature: across the swing the
+    bob rises at twice the frequency by ``L(1 - cos φ)``, so ``A_v(2f) / A_u(f) ≈ φ₀ / 4``
+    whatever the camera's scale and the pivot's place."""
+    t = np.arange(len(u)) / fps
+    _, coef_u = _fit(u, t, frequency, rate)
+    _, coef_v = _fit(v, t, 2 * frequency, 2 * rate)
+    ratio = np.hypot(*coef_v[:2]) / max(np.hypot(*coef_u[:2]), 1e-9)
+    return float(np.degrees(4 * ratio))
+
+
 def video_estimate(clip: Clip, max_amplitude_deg: float = 60.0) -> dict[str, tuple[float, float, float]]:
-    """``{"length": (L₀, low, high)}`` from the clip's tracked period (the motion embedder's track)."""
+    """``{name: (value, low, high)}`` for the length (the tracked period), the amplitude (the
+    arc's curvature) and the phase, from the motion embedder's track of ``clip``.
+
+    Raises:
+        UserInputError: the bob does not cross the middle of its path twice.
+    """
     from physinfer.embedders import MotionSpectrumEmbedder
     from physinfer.errors import UserInputError
     from physinfer.tracking import half_swings
 
     embedder = MotionSpectrumEmbedder()
-    u, _, _ = embedder.track(clip).axes()
+    track = embedder.track(clip, allow_shift=True)
+    u, v, _ = track.axes()
     crossings, _ = half_swings(u, embedder.fps)
     if crossings < 2:
         raise UserInputError(
             f"the clip ({clip.n_frames / clip.fps:.2f} s) is too short to see a full swing: the bob crosses "
             f"the middle of its path {crossings} time(s); give a clip of at least two swings"
         )
-    frequency = dominant_frequency(u, embedder.fps)
+    frequency, rate, _, phase = fitted_swing(u, embedder.fps)
+    angle = float(np.clip(swing_angle(u, v, embedder.fps, frequency, rate), 1.0, max_amplitude_deg))
     small_angle = G / (2 * np.pi * frequency) ** 2
-    low = small_angle / period_factor(max_amplitude_deg) ** 2 * (1 - SLACK)
-    return {"length": (small_angle, low, small_angle * (1 + SLACK))}
+    cycles = frequency * clip.n_frames / clip.fps
+    slack = float(np.clip(SLACK_ONE_CYCLE / cycles, SLACK_MIN, SLACK_MAX))
+    low = small_angle / period_factor(max_amplitude_deg) ** 2 * (1 - slack) ** 2
+    if track.method == "centroid":
+        amplitude = (angle, max(1.0, angle / ANGLE_FACTOR), min(max_amplitude_deg, angle * ANGLE_FACTOR))
+    else:  # tracked by image shift (a swing smaller than the bob): no curvature to read
+        amplitude = (SMALL_SWING_DEG, 1.0, max_amplitude_deg)
+    return {
+        "length": (small_angle, low, small_angle * (1 + slack) ** 2),
+        "amplitude": amplitude,
+        "phase": (phase, 0.0, 1.0),
+    }
