@@ -295,14 +295,20 @@ def prepare_for_embedding(clip: Clip, *, fps: float, n_frames: int, size: int) -
 
 
 def write_video(
-    path: str | Path, frames: np.ndarray | Clip, fps: float | None = None, *, lossless: bool = False
+    path: str | Path,
+    frames: np.ndarray | Clip,
+    fps: float | None = None,
+    *,
+    lossless: bool = False,
+    crf: int = 18,
 ) -> Path:
     """Write ``(T, H, W, 3)`` uint8 frames as mp4 (H.264, yuv420p) or gif, atomically.
 
     Odd frame sizes are padded by one pixel for H.264.
 
     ``lossless``: H.264 in RGB without loss (``libx264rgb``, quantiser 0; a 200-frame 112-px
-    flag clip takes 1.5 MB against 71 kB): reading it back gives these frames exactly. The
+    flag clip takes 1.5 MB against 71 kB): reading it back gives these frames exactly. ``crf``:
+    the lossy quality (18 near-transparent; phones write about 23-28). The
     lossy encoding is not repeatable here — the same frames, written in another process,
     decoded to other pixels now and then (libx264 through PyAV on the 2-core machine, with
     one encoder thread too) — so a video that is to be the same target every time it is made
@@ -321,13 +327,13 @@ def write_video(
         if suffix == ".gif":
             _write_gif(tmp, frames, fps)
         elif suffix in VIDEO_SUFFIXES:
-            _write_pyav(tmp, frames, fps, lossless)
+            _write_pyav(tmp, frames, fps, lossless, crf)
         else:
             raise UserInputError(f"{path}: write .mp4 or .gif, not {suffix!r}")
     return path
 
 
-def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = False) -> None:
+def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = False, crf: int = 18) -> None:
     from fractions import Fraction
 
     import av
@@ -340,7 +346,7 @@ def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = Fal
         stream = container.add_stream("libx264rgb" if lossless else "libx264", rate=rate)
         stream.width, stream.height = frames.shape[2], frames.shape[1]
         stream.pix_fmt = "rgb24" if lossless else "yuv420p"
-        stream.options = {"qp": "0", "preset": "veryfast"} if lossless else {"crf": "18", "preset": "veryfast"}
+        stream.options = {"qp": "0", "preset": "veryfast"} if lossless else {"crf": str(int(crf)), "preset": "veryfast"}
         for fr in frames:
             for packet in stream.encode(av.VideoFrame.from_ndarray(fr, format="rgb24")):
                 container.mux(packet)
