@@ -14,9 +14,12 @@ Layout of ``--out DIR``::
     noise_prior.json, selection.json   the observation noise and --select-top's re-simulations
     .physinfer.lock   held by the process writing the run (:mod:`physinfer.locking`)
 
+    .physinfer.json   the manifest: this folder is a refine run's (:mod:`physinfer.outputs`)
+
 Nothing outside ``DIR`` is written, and nothing in it that the run did not create: an
 ``--out`` holding anything but a run (a new or empty directory) is refused, and
-``--overwrite`` removes only the files listed above. ``--resume`` reads ``run.json`` and
+``--overwrite`` removes only the files listed above. A run is recognised by its manifest,
+never by a ``run.json`` alone. ``--resume`` reads ``run.json`` and
 ``trials.jsonl`` back; a corrupt log is a clear error and nothing is overwritten.
 
 Everything a resumed run depends on is its identity (:data:`IDENTITY`): plugin, optimizer,
@@ -42,7 +45,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
-from physinfer.locking import LOCK_FILE
+from physinfer.outputs import MANIFEST_FILE, OutputFolder
 
 RUN_FILE = "run.json"
 TRIALS_FILE = "trials.jsonl"
@@ -165,24 +168,22 @@ class RunDirectory:
                 f"--target {target} is a file the run writes into --out {self.path}; "
                 "move the video elsewhere or choose another --out"
             )
-        if not self.path.is_dir():
-            return
-        if self.run_file.exists():
-            if not self.holds_run():
-                raise UserInputError(
-                    f"--out {self.path} holds a {RUN_FILE} that physinfer did not write; choose another --out"
-                )
-            return
-        others = sorted(p.name for p in self.path.iterdir() if p.name != LOCK_FILE)
-        if others:
-            shown = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+        if self.run_file.exists() and not self.holds_run():
             raise UserInputError(
-                f"--out {self.path} is not empty ({shown}) and holds no physinfer run; a run would mix its "
-                f"files with yours: give a new or empty directory, e.g. --out {self.path / 'run'}"
+                f"--out {self.path} holds a {RUN_FILE} that physinfer did not write (no {MANIFEST_FILE} "
+                "of a refine run beside it); choose another --out"
             )
+        self.output_folder().check(overwrite=overwrite)
+
+    def output_folder(self) -> OutputFolder:
+        """The run directory as an output folder of ``refine`` (:mod:`physinfer.outputs`)."""
+        return OutputFolder(self.path, "refine", RUN_OUTPUTS, noun="run", resumes=True)
 
     def holds_run(self) -> bool:
-        """Whether ``run.json`` is a physinfer run's (a JSON object naming its plugin)."""
+        """Whether the folder holds a physinfer run: its manifest says ``refine`` wrote it and
+        ``run.json`` is a JSON object naming its plugin (a ``run.json`` alone is anyone's)."""
+        if not self.output_folder().owned():
+            return False
         try:
             info = json.loads(self.run_file.read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
@@ -200,7 +201,11 @@ class RunDirectory:
                 f"{self.path} already holds a run; continue it with --resume, "
                 "or choose another --out (or pass --overwrite to start over)"
             )
-        self.path.mkdir(parents=True, exist_ok=True)
+        if self.run_file.exists() and not self.holds_run():
+            raise UserInputError(
+                f"--out {self.path} holds a {RUN_FILE} that physinfer did not write; choose another --out"
+            )
+        self.output_folder().claim(overwrite=overwrite)
         for name in RUN_OUTPUTS:
             (self.path / name).unlink(missing_ok=True)
         atomic_write_json(self.run_file, run_info)

@@ -357,6 +357,7 @@ def test_infer_reports_intervals_labels_and_writes_samples_and_a_corner_plot(
         "500",
         "--out",
         str(out),
+        "--overwrite",  # the results of the infer above are replaced only when told
     )
     assert human.returncode == 0 and "length" in human.stderr and "identified" in human.stderr
 

@@ -100,9 +100,7 @@ def test_resume_refuses_other_plugin_and_corrupt_log(tmp_path):
 
 def test_resume_refuses_a_run_of_another_plugin(tmp_path):
     out = tmp_path / "run"
-    out.mkdir()
-    (out / "run.json").write_text(json.dumps({"plugin": "flag", "optimizer": "ax", "seed": 0}))
-    (out / "trials.jsonl").write_text("")
+    RunDirectory(out).create({"plugin": "flag", "optimizer": "ax", "seed": 0})  # with its manifest
     registry, _ = load_registry()
     with pytest.raises(UserInputError, match="--plugin: run flag, now pendulum"):
         refine(registry, plugin="pendulum_lab", steps=2, out=out, resume=True, progress=False)

@@ -15,6 +15,7 @@ import pytest
 from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
 from physinfer.errors import UserInputError
 from physinfer.locking import LOCK_FILE, DirectoryLock
+from physinfer.outputs import MANIFEST_FILE
 from physinfer.plugins import load_registry
 from physinfer.rundir import RUN_OUTPUTS, RunDirectory
 from physinfer.session import refine
@@ -89,7 +90,9 @@ def test_overwrite_removes_the_old_runs_files_and_nothing_else(tmp_path):
     (run_dir.path / "notes.txt").write_text("mine")
     run_dir.create({"plugin": "pendulum_lab", "parameters": {}, "seed": 1}, overwrite=True)
     left = {p.name for p in run_dir.path.iterdir()}
-    assert left == {"run.json", "trials.jsonl", "notes.txt"}, "no output of the old run may sit beside the new one"
+    assert left == {"run.json", "trials.jsonl", "notes.txt", MANIFEST_FILE}, (
+        "no output of the old run may sit beside the new one"
+    )
     assert (run_dir.path / "notes.txt").read_text() == "mine"
 
 
@@ -141,7 +144,7 @@ def test_an_empty_folder_left_with_a_lock_file_is_usable(registry, tmp_path):
 
 def test_diagnose_refuses_a_folder_of_the_users_files_and_a_second_writer(registry, users_folder, tmp_path):
     before = contents(users_folder)
-    with pytest.raises(UserInputError, match="is not empty .* holds no diagnosis"):
+    with pytest.raises(UserInputError, match="is not empty .* holds no physinfer diagnosis"):
         run_diagnosis(registry, DiagnoseSettings(plugin="pendulum_lab", out=users_folder, steps=2))
     assert contents(users_folder) == before
     out = tmp_path / "diagnosis"

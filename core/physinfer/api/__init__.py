@@ -78,6 +78,12 @@ __all__ = [
     "train_posterior",
 ]
 
+#: What ``infer`` writes into its ``--out`` (the folder's manifest lists them; ``--overwrite``
+#: removes them and nothing else).
+INFER_OUTPUTS = ("posterior.json", "samples.npz", "corner.png", "report.html")
+#: What ``evaluate calibration`` writes into its ``--out``.
+CALIBRATION_OUTPUTS = ("calibration.json", "calibration.png")
+
 #: ``progress``: ``True`` for rich bars on stderr, or ``(done, total, best_distance) -> None``.
 Progress = bool | Callable[[int, int, float], None]
 
@@ -311,23 +317,26 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
         The :class:`~physinfer.posterior.workflow.PosteriorReport`: ``marginals`` (median,
         50 % and 90 % intervals, label per parameter), ``to_dict()`` and ``plot()``.
     """
+    from physinfer.outputs import OutputFolder
     from physinfer.posterior.workflow import infer as run
 
     o = with_settings(InferOptions, options, settings)
-    return run(
-        registry(),
-        plugin=plugin,
-        out=_optional(o.out) or _default_out(f"infer-{plugin}"),
-        target_path=_optional(o.target),
-        posterior=_optional(o.posterior),
-        fps=o.fps,
-        truth=as_assignments(o.truth, "truth"),
-        n_samples=o.samples,
-        seed=o.seed,
-        device=o.device,
-        scene_set=o.scene_set,
-        conditioning=o.conditioning(),
-    )
+    out = _optional(o.out) or _default_out(f"infer-{plugin}")
+    with OutputFolder(out, "infer", INFER_OUTPUTS, example="infer").writing(overwrite=o.overwrite):
+        return run(
+            registry(),
+            plugin=plugin,
+            out=out,
+            target_path=_optional(o.target),
+            posterior=_optional(o.posterior),
+            fps=o.fps,
+            truth=as_assignments(o.truth, "truth"),
+            n_samples=o.samples,
+            seed=o.seed,
+            device=o.device,
+            scene_set=o.scene_set,
+            conditioning=o.conditioning(),
+        )
 
 
 #: ``progress`` of a staged job: ``True`` for rich bars on stderr, or ``(stage, done, total) -> None``.
@@ -414,13 +423,16 @@ def evaluate_calibration(
         The :class:`~physinfer.posterior.calibrate_workflow.CalibrationReport`: coverage,
         ranks, median errors and contraction per parameter, ``to_dict()`` and ``plot()``.
     """
+    from physinfer.outputs import OutputFolder
     from physinfer.posterior.calibrate_workflow import evaluate_calibration as run
 
     o = with_settings(CalibrationOptions, options, settings)
     data = required(o.data, "data", "a dataset of held-out simulations (physinfer dataset generate)")
-    with _staged_progress(progress) as report:
+    out = _optional(o.out) or _default_out(f"calibration-{plugin}")
+    folder = OutputFolder(out, "evaluate calibration", CALIBRATION_OUTPUTS, example="calibration")
+    with folder.writing(overwrite=o.overwrite), _staged_progress(progress) as report:
         return run(
-            registry(), plugin=plugin, data=data, out=_optional(o.out) or _default_out(f"calibration-{plugin}"),
+            registry(), plugin=plugin, data=data, out=out,
             posterior=_optional(o.posterior), split=o.split, n_samples=o.samples, seed=o.seed,
             device=o.device, progress=report,
         )  # fmt: skip

@@ -217,7 +217,8 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
     Raises:
         UserInputError: a missing or malformed trajectory (varying vertex counts, missing
             frames, object arrays), an OBJ folder without ``fps``, an ``fps`` (given or
-            recorded) outside 0.1-1000, a bad ζ or scene, an ``out`` that is not a video name.
+            recorded) outside 0.1-1000, a bad ζ or scene, an ``out`` that is not a video name,
+            an existing ``out`` without ``overwrite``.
     """
     from physinfer.api.plugins import registry
     from physinfer.meshio import load_trajectory
@@ -228,10 +229,12 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
     if o.fps is not None:  # 0.1-1000 fps, before the renderer is made
         check_fps(o.fps)
     out = None if o.out is None else Path(o.out)
-    if out is not None and out.suffix.lower() not in (".mp4", ".gif"):
-        raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
-    if out is not None and out.is_dir():
-        raise UserInputError(f"--out {out} is a directory; give a file name")
+    if out is not None:  # the user's video stays theirs: refused before anything is rendered
+        from physinfer.io import check_output_file
+
+        if out.suffix.lower() not in (".mp4", ".gif"):
+            raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
+        check_output_file(out, "--out", overwrite=o.overwrite)
     phenomenon = registry().phenomenon(plugin)
     scene = resolve_scene(phenomenon, dict(o.scene_set))
     renderer = bind_scene(phenomenon, scene).make_renderer()

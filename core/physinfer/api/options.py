@@ -225,6 +225,8 @@ class InferOptions(TargetOptions, FootageOptions):
     Attributes:
         posterior: Estimator file (``None``: the phenomenon's shipped one).
         out: Directory for posterior.json, samples.npz and corner.png (``None``: ``runs/infer-<plugin>-<time>``).
+        overwrite: Replace an earlier infer's results in ``out`` (only those; a folder of
+            other files is refused whatever this says).
         samples: Posterior samples drawn.
         seed: Seed of the sampling.
         device: torch device.
@@ -233,6 +235,7 @@ class InferOptions(TargetOptions, FootageOptions):
 
     posterior: Path | None = None
     out: Path | None = None
+    overwrite: bool = False
     samples: int = 5000
     seed: int = 0
     device: str | None = None
@@ -288,6 +291,7 @@ class CalibrationOptions:
         seed: Seed of the posterior samples.
         out: Directory for calibration.json and calibration.png (``None``:
             ``runs/calibration-<plugin>-<time>``).
+        overwrite: Replace an earlier calibration's results in ``out`` (only those).
         device: torch device.
     """
 
@@ -297,6 +301,7 @@ class CalibrationOptions:
     samples: int = 1000
     seed: int = 0
     out: Path | None = None
+    overwrite: bool = False
     device: str | None = None
 
 
@@ -347,6 +352,8 @@ class RenderOptions:
             ``best_trajectory.npz``) or a folder of per-frame ``.obj`` meshes in physinfer's
             frame (metres, z up, wind along +x).
         out: Video to write (``.mp4``/``.gif``; ``None``: none, the clip is returned).
+        overwrite: Replace ``out`` when it exists (by default an existing file is refused
+            before anything is rendered).
         fps: Frame rate of the trajectory: required for OBJ folders, overrides an NPZ's.
         render_set: Render settings ζ, ``{NAME: VALUE}``.
         scene_set: The scene's settings (the flag's ``pole_height`` draws a pole for meshes
@@ -355,6 +362,7 @@ class RenderOptions:
 
     trajectory: Path | None = None
     out: Path | None = None
+    overwrite: bool = False
     fps: float | None = None
     render_set: Mapping[str, Any] = field(default_factory=dict)
     scene_set: Mapping[str, Any] = field(default_factory=dict)

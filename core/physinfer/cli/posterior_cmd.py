@@ -140,6 +140,14 @@ def infer_cmd(
         Path | None,
         typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png."),
     ] = None,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace an earlier infer's results in --out (only those; a folder of other files "
+            "is refused).",
+        ),
+    ] = False,
     device: DeviceOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
@@ -182,6 +190,14 @@ def calibration_cmd(
         Path | None,
         typer.Option("--out", help="Directory for calibration.json and calibration.png."),
     ] = None,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace an earlier calibration's results in --out (only those; a folder of other "
+            "files is refused).",
+        ),
+    ] = False,
     device: DeviceOpt = None,
     as_json: JsonOpt = False,
 ) -> None:

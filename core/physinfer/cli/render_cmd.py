@@ -36,6 +36,14 @@ def render_cmd(
         ),
     ],
     out: Annotated[Path, typer.Option("--out", help="Video to write (.mp4 or .gif).")],
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Replace --out when it exists (by default an existing file is refused before "
+            "anything is rendered).",
+        ),
+    ] = False,
     fps: Annotated[
         float | None,
         typer.Option(

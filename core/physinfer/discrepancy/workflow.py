@@ -76,15 +76,15 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
     run_stage,
 )
 from physinfer.errors import UserInputError
-from physinfer.io import atomic_write_json, check_output_dir
-from physinfer.locking import LOCK_FILE, exclusive_directory
+from physinfer.io import atomic_write_json
+from physinfer.locking import exclusive_directory
 from physinfer.loop import Pipeline, RefineConfig
 from physinfer.noise import noise_seeds
+from physinfer.outputs import OutputFolder
 from physinfer.parameters import refuse_repeats
 from physinfer.progress import StageProgress
 from physinfer.registry import Registry
 from physinfer.roles import Target
-from physinfer.rundir import RUN_FILE
 from physinfer.scene import scene_of
 
 Log = Callable[[str], None]
@@ -258,6 +258,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     effect_objs = {name: registry.effect(name, phenomenon=phenomenon.name) for name in effect_names}
     # Everything is checked: only now is --out created, and held against a second writer.
     with exclusive_directory(settings.out):
+        diagnosis_folder(settings.out).claim()
         report = _diagnose(registry, settings, base, target, effect_objs, log or (lambda _msg: None))
         if (scene := scene_of(phenomenon)) is not None:
             report["scene"] = scene
@@ -282,23 +283,27 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
     return base, target
 
 
+#: What ``diagnose`` writes at the top of its ``--out`` (besides its stages' refine runs,
+#: ``effect-NAME/`` and ``calibration-K/``, each a run folder of its own).
+DIAGNOSE_OUTPUTS = (
+    "diagnosis.json", "baseline", "model.json", "maps.png", "gaps.png", "side_by_side.mp4",
+    "limits.json", "report.html",
+)  # fmt: skip
+
+
+def diagnosis_folder(out: Path) -> OutputFolder:
+    """``diagnose --out`` as an output folder (:mod:`physinfer.outputs`); it resumes."""
+    return OutputFolder(out, "diagnose", DIAGNOSE_OUTPUTS, noun="diagnosis", resumes=True, example="diagnosis")
+
+
 def check_diagnosis_out(out: Path) -> None:
-    """Refuse a ``diagnose --out`` that is a file or holds files that are not a diagnosis's.
+    """Refuse a ``diagnose --out`` that is a file or holds files that are not a diagnosis's
+    (a diagnosis is recognised by the manifest it writes first, never by its file names).
 
     Raises:
         UserInputError: naming what is there and what to give instead.
     """
-    check_output_dir(out)
-    if not out.is_dir() or (out / "baseline" / RUN_FILE).is_file() or (out / "diagnosis.json").is_file():
-        return
-    # A lock file and an empty baseline/ are what a diagnosis killed at its start leaves.
-    others = sorted(p.name for p in out.iterdir() if p.name not in (LOCK_FILE, "baseline"))
-    if others:
-        shown = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
-        raise UserInputError(
-            f"--out {out} is not empty ({shown}) and holds no diagnosis; a diagnosis would mix its files "
-            f"with yours: give a new or empty directory, e.g. --out {out / 'diagnosis'}"
-        )
+    diagnosis_folder(out).check()
 
 
 def _diagnose(

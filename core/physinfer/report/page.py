@@ -94,12 +94,49 @@ def build_report(run_dir: str | Path) -> Report:
     return Report(kind, run_dir, page(content.title, content.subtitle, content.body, footer))
 
 
-def write_report(run_dir: str | Path) -> Report:
+def check_owned_run(run_dir: str | Path) -> None:
+    """Refuse a folder whose manifest does not say a refine, diagnose or infer wrote it.
+
+    A ``posterior.json`` or ``run.json`` alone does not make a run: the folder may be the
+    user's, and its ``report.html`` theirs.
+
+    Raises:
+        UserInputError: no manifest (:mod:`physinfer.outputs`), or another command's.
+    """
+    from physinfer.outputs import MANIFEST_FILE, folder_command
+
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise UserInputError(
+            f"{run_dir} is not a directory; give the --out folder of a refine, diagnose or infer run"
+        )
+    command = folder_command(run_dir)
+    if command is None:
+        raise UserInputError(
+            f"{run_dir} is not a physinfer run (it has no {MANIFEST_FILE}, which refine, diagnose and "
+            "infer write into their --out); report writes report.html only into such a folder"
+        )
+    if command not in _BUILDERS:
+        raise UserInputError(
+            f"{run_dir} holds physinfer's {command} output, not a refine, diagnose or infer run; "
+            "report draws pages of those runs only"
+        )
+
+
+def write_report(run_dir: str | Path, *, check_owner: bool = True) -> Report:
     """Build the page of ``run_dir`` and write it atomically to ``run_dir/report.html``.
 
     Non-ASCII text is written as character references, so the file reads the same under
     any locale's encoding.
+
+    Args:
+        run_dir: The run's folder.
+        check_owner: Refuse a folder physinfer's manifest does not name as a refine, diagnose
+            or infer run (:func:`check_owned_run`); a run writing its own page at its end
+            passes ``False``.
     """
+    if check_owner:
+        check_owned_run(run_dir)
     report = build_report(run_dir)
     report.path = Path(run_dir) / REPORT_FILE
     report.html = report.html.encode("ascii", "xmlcharrefreplace").decode("ascii")
@@ -110,11 +147,13 @@ def write_report(run_dir: str | Path) -> Report:
 def write_report_quietly(run_dir: str | Path) -> Path | None:
     """:func:`write_report` for the end of a run: any failure is one warning line, not an error.
 
+    The run has just written its own files into ``run_dir``, which it checked and claimed.
+
     Returns:
         The page's path, or ``None`` when it could not be written.
     """
     try:
-        return write_report(run_dir).path
+        return write_report(run_dir, check_owner=False).path
     except Exception as exc:  # noqa: BLE001 - the run's results are written; the page is a convenience
         _log.warning("warning: %s not written in %s: %s", REPORT_FILE, run_dir, exc)
         return None

@@ -153,6 +153,15 @@ def check_positive(name: str, value: int | None) -> None:
 # ----------------------------------------------------------------------------- train
 
 
+def _train_folder(out: Path) -> Any:
+    """``train --out`` as an output folder of ``train`` (:mod:`physinfer.outputs`)."""
+    from physinfer.outputs import OutputFolder
+
+    # The names of physinfer_flag.sdn.training and .weights, without importing torch here.
+    outputs = ("sdn.safetensors", "checkpoint.safetensors", "history.json")
+    return OutputFolder(out, "train", outputs, resumes=True, example="sdn")
+
+
 @handle_errors()
 def train_cmd(
     plugin: PluginOpt,
@@ -185,6 +194,8 @@ def train_cmd(
 ) -> None:
     """Train the SDN on a dataset's train split; checkpoint each epoch, keep the best on val."""
     require_plugin(plugin, "train")
+    folder = _train_folder(out)
+    folder.check()  # the user's weights and history stay theirs; a run of train's own resumes
     require_dataset_dir(data)
     rule = {"simulation": "simulation", "parameters": "theta", "theta": "theta"}.get(positives)
     if rule is None:
@@ -215,6 +226,7 @@ def train_cmd(
 
     started = time.perf_counter()
     with cpu_threads(threads), exclusive_directory(out):  # one writer of --out's checkpoint
+        folder.claim()
         summary = train_from_directory(
             data,
             out,

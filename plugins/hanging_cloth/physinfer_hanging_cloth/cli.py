@@ -18,6 +18,9 @@ import typer
 from physinfer.cli.app import JsonOpt, emit_json, err_console, handle_errors, registry_and_infos
 from physinfer.errors import UserInputError
 
+#: What ``evaluate bouman`` writes into its ``--out``.
+BOUMAN_OUTPUTS = ("bouman.png", "result.json", "predictions.csv")
+
 
 @handle_errors()
 def evaluate_bouman_cmd(
@@ -30,25 +33,30 @@ def evaluate_bouman_cmd(
     out: Annotated[
         Path | None, typer.Option("--out", help="Directory for the chart and predictions (default: runs/bouman-*).")
     ] = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace an earlier evaluation's results in --out (only those).")
+    ] = False,
     pca_dims: Annotated[int, typer.Option("--pca-dims", help="PCA components (the paper: 50).")] = 50,
     as_json: JsonOpt = False,
 ) -> None:
     """Bouman et al. evaluation: embeddings → PCA → linear regression, leave one fabric out → Pearson R."""
     from physinfer.devices import check_device
-    from physinfer.io import atomic_write_json, atomic_write_text, check_output_dir
+    from physinfer.io import atomic_write_json, atomic_write_text
+    from physinfer.outputs import OutputFolder
     from physinfer_hanging_cloth.data import load_dataset
     from physinfer_hanging_cloth.evaluation import embed_videos, evaluate_embeddings, plot_bars
 
     if pca_dims < 1:
         raise UserInputError(f"--pca-dims must be at least 1, got {pca_dims}")
     device = check_device(device)  # also for embedders that take none: never silently ignored
-    if out is not None:
-        check_output_dir(out)
+    if out is None:
+        out = Path("runs") / f"bouman-{embedder}-{time.strftime('%Y%m%d-%H%M%S')}"
+    folder = OutputFolder(out, "evaluate bouman", BOUMAN_OUTPUTS, example="bouman")
+    folder.check(overwrite=overwrite)  # before the data is read or a network loaded
     dataset = load_dataset(data)  # check the data before loading any network
     registry, _ = registry_and_infos()
     embedder_obj = registry.embedder(embedder, model=str(model) if model else None, device=device)
-    if out is None:
-        out = Path("runs") / f"bouman-{embedder}-{time.strftime('%Y%m%d-%H%M%S')}"
+    folder.claim(overwrite=overwrite)
     started = time.perf_counter()
 
     def progress(done: int, total: int) -> None:
@@ -88,16 +96,24 @@ def dataset_bouman_cmd(
     as_json: JsonOpt = False,
 ) -> None:
     """Write a synthetic hanging-cloth dataset in the Bouman format (fabrics × fan levels W1–W3)."""
-    from physinfer.io import check_output_dir
-    from physinfer_hanging_cloth.generate import SyntheticSettings, generate_dataset
+    from physinfer.outputs import OutputFolder
+    from physinfer_hanging_cloth.data import VIDEO_DIR
+    from physinfer_hanging_cloth.generate import (
+        SETTINGS_FILE,
+        TABLE_FILE,
+        SyntheticSettings,
+        generate_dataset,
+    )
 
-    check_output_dir(out)
+    outputs = (SETTINGS_FILE, TABLE_FILE, VIDEO_DIR)
+    folder = OutputFolder(out, "dataset bouman", outputs, resumes=True, example="bouman")
     settings = SyntheticSettings(n_fabrics=fabrics, n_frames=frames, image_size=size, seed=seed)
 
     def progress(done: int, total: int) -> None:
         err_console.print(f"fabric {done}/{total} done", highlight=False)
 
-    summary = generate_dataset(out, settings, on_video=progress)
+    with folder.writing():  # the user's files stay theirs; the generator's own folder resumes
+        summary = generate_dataset(out, settings, on_video=progress)
     if as_json:
         emit_json(summary)
         return
