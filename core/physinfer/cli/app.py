@@ -26,10 +26,12 @@ import typer
 from physinfer.cli.common import (
     _TYPER_FLOW,
     TRACEBACK_DIR,
+    JsonAwareGroup,
     emit_json,
     handle_errors,
     registry_and_infos,
     report_internal_error,
+    say_error,
 )
 from physinfer.cli.options import (
     CLI_ONLY,
@@ -104,6 +106,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=JsonAwareGroup,
 )
 
 # The host's own commands, in the order `physinfer --help` lists them (plugins' come after);
@@ -143,6 +146,7 @@ def _mount_plugin_commands() -> None:
             parent = groups.get(parent_name) or _new_group(parent_name, groups)
             name = child
         if isinstance(obj, typer.Typer):
+            wrap_plugin_group(obj)
             parent.add_typer(obj, name=name, help=entry.description or None)
             if parent is app:
                 groups[name] = obj
@@ -152,6 +156,18 @@ def _mount_plugin_commands() -> None:
                 name, help=entry.description or None, context_settings=settings
             )
             command(handle_errors()(obj))
+
+
+def wrap_plugin_group(group: typer.Typer) -> None:
+    """Give every command of a plugin's own ``typer.Typer`` (and of its sub-groups) the one
+    error path, as a plugin's single commands get it when mounted (:func:`handle_errors`).
+    A command already wrapped is left as it is."""
+    for info in group.registered_commands:
+        if info.callback is not None and not getattr(info.callback, "_physinfer_errors", False):
+            info.callback = handle_errors()(info.callback)
+    for sub in group.registered_groups:
+        if sub.typer_instance is not None:
+            wrap_plugin_group(sub.typer_instance)
 
 
 def _subcommand_clash(
@@ -242,9 +258,7 @@ def refuse_unknown_command(cli: typer.Typer, argv: list[str]) -> None:
     blocked = sorted(disabled_plugins())
     if blocked:
         message += f"; PHYSINFER_DISABLED_PLUGINS={','.join(blocked)} blocks those plugins and their commands"
-    err_console.print(
-        f"[bold red]error:[/] {message}; see `physinfer --help`", highlight=False, soft_wrap=True
-    )
+    say_error(f"{message}; see `physinfer --help`")
     if "--json" in argv:
         emit_json({"error": message})
     sys.exit(2)

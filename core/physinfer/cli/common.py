@@ -8,6 +8,7 @@ traceback was saved to (in the system's temporary directory, never in ``--out``)
 
 from __future__ import annotations
 
+import errno
 import functools
 import json
 import os
@@ -19,7 +20,15 @@ from pathlib import Path
 from typing import Any
 
 import typer
+from typer.core import TyperGroup
 from typer.exceptions import TyperException
+
+try:  # typer 0.20+ carries its own click
+    from typer._click.exceptions import ClickException, UsageError
+    from typer._click.globals import get_current_context
+except ImportError:  # pragma: no cover - a typer on the click package
+    from click import get_current_context  # type: ignore[no-redef]
+    from click.exceptions import ClickException, UsageError  # type: ignore[no-redef]
 
 from physinfer.console import err_console
 from physinfer.errors import PhysinferError, UserInputError
@@ -68,7 +77,7 @@ def handle_errors(
     def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
         @functools.wraps(func)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
-            as_json = bool(kwargs.get(as_json_param))
+            as_json = bool(kwargs.get(as_json_param)) or _json_given()
             try:
                 if "seed" in kwargs:
                     from physinfer.settings import check_seed
@@ -76,9 +85,18 @@ def handle_errors(
                     check_seed(kwargs["seed"])
                 return func(*args, **kwargs)
             except (UserInputError, PhysinferError) as exc:
-                err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+                say_error(str(exc))
                 if as_json:
                     emit_json({"error": str(exc)})
+                raise typer.Exit(2) from None
+            except OSError as exc:
+                if exc.errno not in DISK_FULL:
+                    report_internal_error(exc, as_json=as_json)
+                    raise typer.Exit(1) from None
+                message = disk_full_message(exc)
+                say_error(message)
+                if as_json:
+                    emit_json({"error": message})
                 raise typer.Exit(2) from None
             except KeyboardInterrupt:
                 err_console.print(interrupted, highlight=False)
@@ -89,9 +107,70 @@ def handle_errors(
                 report_internal_error(exc, as_json=as_json)
                 raise typer.Exit(1) from None
 
+        wrapper._physinfer_errors = True  # type: ignore[attr-defined]
         return wrapper
 
     return decorate
+
+
+#: ``errno`` of a write that found no room: a full disk, a file-size limit (``ulimit -f``), a quota.
+DISK_FULL = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
+
+
+def disk_full_message(exc: OSError) -> str:
+    """One line for a write that found no room, naming the file when the error does."""
+    what = {errno.ENOSPC: "no space left on the device", errno.EFBIG: "file too large for this system's "
+            "limit (ulimit -f)", errno.EDQUOT: "disk quota exceeded"}.get(exc.errno or 0, str(exc))  # fmt: skip
+    where = f" writing {exc.filename}" if exc.filename else ""
+    return f"{what}{where}; free space (or raise the limit) and run the command again"
+
+
+def _json_given() -> bool:
+    """Whether the running command was given ``--json``, whatever its parameter is named."""
+    ctx = get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return any(
+        "--json" in getattr(param, "opts", ()) and bool(ctx.params.get(param.name or ""))
+        for param in ctx.command.params
+    )
+
+
+class JsonAwareGroup(TyperGroup):
+    """The root command group: under ``--json`` a parse error (a bad value, a missing or
+    unknown option) is one ``error:`` line and one ``{"error": ...}`` object, exit status 2,
+    instead of typer's usage box. Without ``--json`` the box stays (it shows the usage)."""
+
+    def main(  # type: ignore[override]
+        self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+        standalone_mode: bool = True, **extra: Any,
+    ) -> Any:  # fmt: skip
+        argv = list(sys.argv[1:] if args is None else args)
+        if not standalone_mode or "--json" not in argv:
+            return super().main(argv, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(argv, prog_name, complete_var, False, **extra)
+        except ClickException as exc:
+            message = " ".join(exc.format_message().split())
+            ctx = getattr(exc, "ctx", None)
+            if ctx is not None:
+                message += f"; see `{ctx.command_path} --help`"
+            say_error(message)
+            emit_json({"error": message})
+            sys.exit(2 if isinstance(exc, UsageError) else exc.exit_code)
+        except typer.Abort:
+            say_error("aborted")
+            emit_json({"error": "aborted"})
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+def say_error(message: str) -> None:
+    """``error: MESSAGE`` on stderr, one line. The message is printed as it is: its square
+    brackets (a path such as ``[bold]flag[/bold].mp4``) are text, never rich markup."""
+    from rich.markup import escape
+
+    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 def report_internal_error(exc: BaseException, *, as_json: bool) -> None:
@@ -115,6 +194,6 @@ def report_internal_error(exc: BaseException, *, as_json: bool) -> None:
     except OSError as write_error:
         where = f"the traceback could not be saved ({write_error.strerror or write_error})"
     message = f"internal error ({summary}); {where}"
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    say_error(message)
     if as_json:
         emit_json({"error": message, "traceback": str(path) if path else None})

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from physinfer.cli.app import SceneSetOpt, emit_json, handle_errors
 from physinfer.errors import UserInputError
@@ -213,7 +214,7 @@ def _summary_line(result: GenerateResult) -> str:
     )
     failed = f"; {len(result.failed_sims)} simulations failed and were skipped" if result.failed_sims else ""
     return (
-        f"[bold]{sum(result.renders.values())} renders[/] in {result.root} "
+        f"[bold]{sum(result.renders.values())} renders[/] in {escape(str(result.root))} "
         f"({result.bytes / 1e9:.2f} GB); wrote {result.renders_generated} in {result.seconds:.1f} s "
         f"({result.renders_per_minute:.1f} renders/min); {units}{failed}"
     )

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from physinfer.cli.app import (
     DiagnoseBatchSizeOpt,
@@ -167,7 +168,7 @@ def diagnose_cmd(
 
     options = options_from_cli(api.DiagnoseOptions, given)
     diagnosis = api.diagnose(
-        plugin, options, log=lambda msg: err_console.print(msg, highlight=False), progress=True
+        plugin, options, log=lambda msg: err_console.print(msg, markup=False, highlight=False), progress=True
     )
     report, out = diagnosis.to_dict(), diagnosis.out
     if as_json:
@@ -198,9 +199,10 @@ def diagnose_cmd(
             err_console.print(f"  ({note})", highlight=False)
     for c in report.get("screened") or []:
         err_console.print(f"  {screened_line(c)}", highlight=False)
-    err_console.print(f"[bold]named effect[/] {report['named_effect'] or 'none'}; results in {out}", highlight=False)
+    named = escape(f"{report['named_effect'] or 'none'}; results in {out}")
+    err_console.print(f"[bold]named effect[/] {named}", highlight=False)
     if leaves := report.get("named_leaves"):
-        err_console.print(f"  [yellow]but[/] {leaves['message']}", highlight=False)
+        err_console.print(f"  [yellow]but[/] {escape(leaves['message'])}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 
 

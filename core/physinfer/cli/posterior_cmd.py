@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from physinfer.cli.app import (
     JsonOpt,
@@ -116,7 +117,7 @@ def train_cmd(
     else:
         how = f"{epochs} epochs (validation loss {losses:.3f})"
     err_console.print(
-        f"trained on {t['pairs']} clips in {how}; wrote {result.path}", highlight=False
+        f"trained on {t['pairs']} clips in {how}; wrote {result.path}", markup=False, highlight=False
     )
 
 
@@ -165,7 +166,7 @@ def infer_cmd(
         emit_json(report.to_dict())
         return
     err_console.print(
-        f"[bold]posterior[/] ({report.estimator.name}, {len(report.samples_unit)} samples)"
+        f"[bold]posterior[/] ({escape(report.estimator.name)}, {len(report.samples_unit)} samples)"
     )
     for line in summary_lines(report.marginals):
         err_console.print(line, highlight=False)
@@ -173,7 +174,7 @@ def infer_cmd(
         err_console.print(
             f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}", highlight=False
         )
-    err_console.print(f"results in {Path(report.paths['posterior']).parent}")
+    err_console.print(f"results in {Path(report.paths['posterior']).parent}", markup=False)
 
 
 @handle_errors()
@@ -225,4 +226,4 @@ def calibration_cmd(
             f"median error {row['median_abs_error']:.3g}, contraction {row['mean_contraction']:.2f}",
             highlight=False,
         )
-    err_console.print(f"results in {Path(report.paths['report']).parent}")
+    err_console.print(f"results in {Path(report.paths['report']).parent}", markup=False)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
 
@@ -109,9 +110,10 @@ def prepare_cmd(
     if video.render_estimate is not None:
         err_console.print(render_estimate_line(video.render_estimate), highlight=False)
     for warning in result.warnings:
-        err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
+        err_console.print(f"[yellow]warning:[/] {escape(warning)}", highlight=False)
     err_console.print(
         f"wrote {video.paths['video']}, {video.paths['json']}, {video.paths['overlay']} (check the box)",
+        markup=False,
         highlight=False,
     )
 

@@ -72,5 +72,6 @@ def render_cmd(
     else:
         err_console.print(
             f"rendered {rendering.loaded.n_frames} frames at {rendering.loaded.fps:g} fps to {out}",
+            markup=False,
             highlight=False,
         )

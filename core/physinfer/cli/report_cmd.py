@@ -37,9 +37,9 @@ def report_cmd(
         emit_json({**report.to_dict(), **({"opened": opened} if open_page else {})})
         return
     size = report.to_dict()["bytes"] / 1024
-    err_console.print(f"wrote {report.path} ({report.kind} run, {size:.0f} kB)", highlight=False)
+    err_console.print(f"wrote {report.path} ({report.kind} run, {size:.0f} kB)", markup=False, highlight=False)
     if opened is False:
-        err_console.print(f"no web browser found; open {report.path} yourself", highlight=False)
+        err_console.print(f"no web browser found; open {report.path} yourself", markup=False, highlight=False)
 
 
 def _open(path: Path | None) -> bool:

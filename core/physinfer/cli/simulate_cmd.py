@@ -62,4 +62,5 @@ def simulate_cmd(
     if as_json:
         emit_json(sim.to_dict())
     else:
-        err_console.print(f"wrote {', '.join(str(p) for p in (out, trajectory_out) if p)}")
+        written = ", ".join(str(p) for p in (out, trajectory_out) if p)
+        err_console.print(f"wrote {written}", markup=False, highlight=False)

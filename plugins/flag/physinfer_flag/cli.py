@@ -249,7 +249,7 @@ def train_cmd(
         f"{summary['epochs_completed']} epochs; best epoch {summary['best_epoch']} ({score})",
         highlight=False,
     )
-    err_console.print(f"weights in {summary['weights']}", highlight=False)
+    err_console.print(f"weights in {summary['weights']}", markup=False, highlight=False)
 
 
 # -------------------------------------------------------------------------- evaluate

@@ -82,6 +82,7 @@ def evaluate_bouman_cmd(
     err_console.print(
         f"Pearson R  stiffness {result.pearson_stiffness:.3f}   area weight {result.pearson_area_weight:.3f}"
         f"   ({result.n_videos} videos, {result.n_fabrics} fabrics, {embedder}); chart {chart}",
+        markup=False,
         highlight=False,
     )
 
@@ -118,5 +119,5 @@ def dataset_bouman_cmd(
         emit_json(summary)
         return
     err_console.print(
-        f"wrote {summary['written']} videos ({summary['kept']} kept) and ground_truth.csv to {out}", highlight=False
+        f"wrote {summary['written']} videos ({summary['kept']} kept) and ground_truth.csv to {out}", markup=False, highlight=False
     )
