@@ -152,13 +152,14 @@ class MotionSpectrumConfig:
             clips: a clip of about one swing has a spectrum as wide as its frequency, but its
             path still fixes the period once the phase (a nuisance) is searched.
         short_s: Clips up to this long keep the path at full weight; the weight falls to 0 at
-            twice this (a long clip's path would make the distance rugged in the period).
+            1.5 times this (a longer clip's path makes the distance rugged in the period: on a
+            6-s clip with it at half weight, 24 trials missed the length by 11 %).
     """
 
     fps: float = 20.0
     n_frames: int = 20
     max_seconds: float = 40.0
-    size: int = 128
+    size: int = 96
     f_min: float = 0.1
     f_max: float = 8.0
     n_freqs: int = 72
@@ -271,7 +272,7 @@ class MotionSpectrumEmbedder(Embedder):
         spectra /= spectra[:, :1].sum(axis=-1, keepdims=True)  # u's spectrum sums to 1 at each width
         segments = np.array_split(u, c.n_segments)
         envelope = np.array([np.sqrt(np.mean(s**2)) for s in segments]) / scale
-        weight = float(np.clip(2.0 - track.duration_s / c.short_s, 0.0, 1.0))
+        weight = float(np.clip(3.0 - 2.0 * track.duration_s / c.short_s, 0.0, 1.0))
         times = np.linspace(0, len(u) - 1, c.n_times)
         path = np.concatenate([np.interp(times, np.arange(len(u)), x) for x in (u, v)]) / scale
         # Amplitudes, not powers (as grid_spectrum): distances grow about linearly with differences.

@@ -62,6 +62,14 @@ def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> Pre
         check_roi(settings.roi, (height, width))
     first, stop = trim_range(clip, settings.start_s, settings.duration_s)
     frames = clip.frames[first:stop]
+    fps_in = float(clip.fps)
+    if settings.fps is not None and settings.fps < fps_in:
+        # Drop the frames the output would not keep before steadying and cropping them: a
+        # 60-fps phone clip read at 20 fps is steadied in a third of the time.
+        from physinfer.video import resample
+
+        frames = resample(Clip(frames, fps_in), settings.fps).frames
+        clip = Clip(frames, float(settings.fps))
     gray, scale = analysis_frames(frames)
     check_not_static(gray)
     reference = len(gray) // 2
@@ -127,7 +135,7 @@ def _prepare(clip: Clip, framing: FramingRule, settings: PrepareSettings) -> Pre
         shake_rms_px=float(shake_rms),
         residual_rms_px=float(residual),
         stabilised=bool(stabilised),
-        fps_in=float(clip.fps),
+        fps_in=fps_in,
         fps_out=float(out.fps),
         frames_kept=(first, stop),
         input_size=(height, width),

@@ -22,6 +22,8 @@ SLACK_ONE_CYCLE, SLACK_MIN, SLACK_MAX = 0.3, 0.03, 0.5
 #: The amplitude read from the arc's curvature is searched within this factor either way
 #: (camera tilt foreshortens the rise; a visible string pulls the centroid towards the pivot).
 ANGLE_FACTOR = 1.8
+#: Decay rates (1/s) of the swing's amplitude tried by the fit; the damping is twice the rate.
+DECAY_RATES = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2, 0.3)
 #: Where the search starts for a swing smaller than the bob (its curvature unreadable).
 SMALL_SWING_DEG = 5.0
 
@@ -61,7 +63,7 @@ def fitted_swing(u: np.ndarray, fps: float) -> tuple[float, float, float, float]
     peak = dominant_frequency(u, fps)
     low = max(0.3 / duration, 0.5 * peak, 0.05)
     best = (np.inf, peak, 0.0, np.zeros(4))
-    for rate in (0.0, 0.1, 0.3, 1.0):
+    for rate in DECAY_RATES:
         for f in np.geomspace(low, min(2.0 * peak, fps / 2.5), 400):
             residual, coef = _fit(u, t, f, rate)
             if residual < best[0]:
@@ -121,4 +123,5 @@ def video_estimate(clip: Clip, max_amplitude_deg: float = 60.0) -> dict[str, tup
         "length": (small_angle, low, small_angle * (1 + slack) ** 2),
         "amplitude": amplitude,
         "phase": (phase, 0.0, 1.0),
+        "damping": (2 * rate, 0.0, 0.5),
     }

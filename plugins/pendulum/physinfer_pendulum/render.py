@@ -39,7 +39,7 @@ class PendulumRenderParams(MappingSettings):
     settings_noun: ClassVar[str] = "render parameter"
     settings_owner: ClassVar[str] = "pendulum"
 
-    size: int = 128
+    size: int = 64
     fill: float = 0.5
     pivot_in_view: int = 0
     elevation_deg: float = 0.0
