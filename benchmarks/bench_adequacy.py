@@ -42,6 +42,8 @@ def main() -> None:
     renderer = phenomenon.make_renderer()
     space = simulator.parameter_space
     args.out.mkdir(parents=True, exist_ok=True)
+    if any(args.out.iterdir()):
+        parser.error(f"--out {args.out} is not empty: give a new folder")
     rows = []
     for i in range(args.targets):
         theta = space.from_unit(np.random.default_rng(300_000 + i).uniform(-1, 1, len(space.names)))
@@ -54,6 +56,7 @@ def main() -> None:
         )  # fmt: skip
         if proc.returncode != 0:
             rows.append({"target": i, "theta": theta, "error": proc.stderr.strip()[-300:]})
+            print(json.dumps(rows[-1]), file=sys.stderr)
             continue
         result = json.loads((run / "result.json").read_text())
         adequacy = result.get("adequacy") or {}

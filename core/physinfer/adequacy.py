@@ -117,7 +117,33 @@ def verdict_line(adequacy: dict[str, Any] | None) -> str | None:
     if not adequacy or adequacy.get("reproduces") is not False:
         return None
     return (
-        f"THE MODEL DOES NOT REPRODUCE THIS VIDEO: the best fit lies {adequacy['statistic']:.3g} times "
+        f"THE MODEL DOES NOT REPRODUCE THIS VIDEO: the {adequacy.get('at', 'best fit')} lies "
+        f"{adequacy['statistic']:.3g} times "
         f"the scale of agreement from it (reproducing needs ≤ {adequacy['threshold']:g}); the numbers "
         "it gives are unreliable. Run `physinfer diagnose` to find what the model lacks."
     )
+
+
+def predictive_check(pipeline: Pipeline, params: dict[str, float], target: Target, seed: int) -> dict[str, Any]:
+    """The verdict on an amortized posterior (``infer``): simulate its median twice (under two
+    seeds: their distance is the noise floor of a stochastic phenomenon), and compare their
+    distance to the target with the scale of agreement, as :func:`assess_fit` does for a
+    refinement's best fit. A video the model cannot make stays far from every θ, the
+    posterior's median included."""
+    from physinfer.noise import noise_seeds
+
+    try:
+        clips = [
+            pipeline.renderer.render(pipeline.simulator.simulate(params, seed=s), target.render_params)
+            for s in noise_seeds(seed, 2)
+        ]
+    except SimulationFailed as exc:
+        return {"reproduces": None, "statistic": None, "threshold": THRESHOLD, "method": METHOD,
+                "note": f"the posterior median could not be simulated: {exc}"}  # fmt: skip
+    embedder = pipeline.embedder
+    target_embedding = np.asarray(embedder.embed(target.clip), float)
+    embeddings = [np.asarray(embedder.embed(clip), float) for clip in clips]
+    to_target = float(np.median([np.sum((e - target_embedding) ** 2) for e in embeddings]))
+    floor = float(np.sum((embeddings[0] - embeddings[1]) ** 2))
+    codec = max(round_trip_distance(embedder, clips[0], seed), round_trip_distance(embedder, target.clip, seed))
+    return {**verdict(to_target, floor, codec), "at": "posterior median"}

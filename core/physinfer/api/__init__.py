@@ -335,6 +335,7 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
             seed=o.seed,
             device=o.device,
             scene_set=o.scene_set,
+            check=o.check,
             conditioning=o.conditioning(),
         )
 

@@ -231,6 +231,8 @@ class InferOptions(TargetOptions, FootageOptions):
         seed: Seed of the sampling.
         device: torch device.
         scene_set: The scene's known settings; an estimator trained on another scene is refused.
+        check: Simulate the posterior's median and say whether the model reproduces the video
+            (``adequacy``; two simulations, seconds on the flag).
     """
 
     posterior: Path | None = None
@@ -240,6 +242,7 @@ class InferOptions(TargetOptions, FootageOptions):
     seed: int = 0
     device: str | None = None
     scene_set: Mapping[str, Any] = field(default_factory=dict)
+    check: bool = True
 
 
 @dataclass(frozen=True)

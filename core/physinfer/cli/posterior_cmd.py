@@ -153,6 +153,14 @@ def infer_cmd(
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check/--no-check",
+            help="Simulate the posterior's median and say whether the model reproduces the video "
+            "(two simulations: seconds on the flag).",
+        ),
+    ] = True,
     as_json: JsonOpt = False,
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
@@ -168,6 +176,10 @@ def infer_cmd(
     err_console.print(
         f"[bold]posterior[/] ({escape(report.estimator.name)}, {len(report.samples_unit)} samples)"
     )
+    from physinfer.adequacy import verdict_line
+
+    if (verdict := verdict_line(report.adequacy)) is not None:
+        err_console.print(verdict, markup=False, highlight=False)
     for line in summary_lines(report.marginals):
         err_console.print(line, highlight=False)
     for pair in report.correlations[:3]:

@@ -39,6 +39,8 @@ class PosteriorReport:
         scene: The target's scene settings, when given.
         space: The estimator's parameter space (for :meth:`plot`).
         target_conditions: How a user's video was framed (:mod:`physinfer.conditioning`).
+        adequacy: Whether the posterior's median reproduces the video
+            (:func:`physinfer.adequacy.predictive_check`), or ``None`` when not checked.
     """
 
     marginals: dict[str, dict[str, Any]]
@@ -52,6 +54,7 @@ class PosteriorReport:
     scene: dict[str, Any] | None = None
     space: ParameterSpace | None = field(default=None, repr=False)
     target_conditions: dict[str, Any] | None = None
+    adequacy: dict[str, Any] | None = None
 
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
@@ -76,6 +79,8 @@ class PosteriorReport:
             d["scene"] = self.scene
         if self.target_conditions:
             d["target_conditions"] = self.target_conditions
+        if self.adequacy is not None:
+            d["adequacy"] = self.adequacy
         if self.truth:
             d["truth"] = self.truth
             d["truth_in_ci90"] = {
@@ -130,9 +135,13 @@ def infer(
     device: str | None = None,
     scene_set: Mapping[str, Any] | None = None,
     conditioning: Conditioning | None = None,
+    check: bool = True,
 ) -> PosteriorReport:
     """The posterior of one video (default: the plugin's embedded target), written to ``out``:
     ``posterior.json``, ``samples.npz`` and ``corner.png``.
+
+    ``check``: simulate the posterior's median and say whether the model reproduces the
+    video (``adequacy``, :func:`physinfer.adequacy.predictive_check`; a few simulations).
 
     ``scene_set``: the target's known scene settings (``--scene-set``); an estimator
     trained on clips of another scene is refused. ``conditioning``: how a ``target_path``
@@ -143,7 +152,7 @@ def infer(
         UserInputError: a mismatched or damaged estimator (another scene included), a
             target too short for it, an unreadable video.
     """
-    from physinfer.pipeline import load_target
+    from physinfer.pipeline import build_pipeline, load_target
 
     if n_samples < 100:
         raise UserInputError(
@@ -173,6 +182,17 @@ def infer(
         seed=seed,
         scene=scene or default_scene(phenomenon),
     )
+    if check:
+        from physinfer.adequacy import predictive_check
+
+        median = report.space.from_unit(np.median(report.samples_unit, axis=0))
+        checked = pipeline if not scene else build_pipeline(
+            registry, plugin, embedder=estimator.config.embedder, embedder_frames=estimator.config.frames_option,
+            weights=Path(estimator.config.weights) if estimator.config.weights else None, device=device, scene_set=scene,
+        )  # fmt: skip
+        t_check = time.perf_counter()
+        report.adequacy = predictive_check(checked, median, target, seed)
+        report.seconds["check"] = time.perf_counter() - t_check
     report.estimator = path
     report.truth = dict(target.truth) if target.truth else None
     report.scene = scene
