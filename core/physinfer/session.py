@@ -82,6 +82,10 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
 
 
 
+#: Narrowest search box per parameter, normalised (a tenth of the range).
+MIN_BOX = 0.2
+
+
 def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict[str, Any]] | None:
     """The search's start and box from what the target video tells directly
     (``Phenomenon.video_estimate``), or ``None`` when the phenomenon reads nothing.
@@ -101,7 +105,8 @@ def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict
     for i, spec in enumerate(space):
         if spec.name in estimate:
             low, high = sorted(np.clip(spec.to_unit(np.array(estimate[spec.name][1:])), -1.0, 1.0))
-            lo[i], hi[i] = low, high
+            # An estimate beyond the range leaves no box: search the edge it points to.
+            lo[i], hi[i] = min(low, 1.0 - MIN_BOX), max(high, -1.0 + MIN_BOX)
     values = {spec.name: float(np.clip(estimate[spec.name][0], *spec.bounds)) for spec in space if spec.name in estimate}
     centre = np.clip(space.to_unit(space.complete(values)), lo, hi)  # the others start at their defaults
     record: dict[str, Any] = {"video_estimate": {k: [float(x) for x in v] for k, v in estimate.items()}}

@@ -133,3 +133,35 @@ def test_the_real_ball_on_a_string_gives_its_length_within_3_percent(tmp_path):
     truth = 9.81 * 1.02**2 / (4 * np.pi**2)  # the README's tracked period
     assert result["best_params"]["length"] == pytest.approx(truth, rel=0.03)
     assert result["adequacy"]["reproduces"] is True
+
+
+def test_a_swing_smaller_than_the_bob_still_gives_its_period(pendulum):
+    from physinfer_pendulum.estimate import video_estimate
+
+    _, phenomenon = pendulum
+    # 5° of a 0.2-m pendulum moves the bob 1.7 cm, less than its 2-cm radius: the foreground's
+    # centroid moves at twice the frequency (two crescents), the image shift does not.
+    clip = render(phenomenon, {"length": 0.2, "damping": 0.3, "amplitude": 5.0, "phase": 0.1}, 6.0)
+    assert video_estimate(clip)["length"][0] == pytest.approx(0.2, rel=0.03)
+
+
+def test_roi_freezes_what_moves_outside_it_for_a_motion_embedder(pendulum):
+    from physinfer.conditioning import outside_frozen
+
+    _, phenomenon = pendulum
+    clip = render(phenomenon, {"length": 0.5, "damping": 0.0, "amplitude": 20.0}, 2.0)
+    frozen = outside_frozen(clip, roi=(0, 0, 32, 64), square=(0, 0, 64, 64))  # the left half
+    assert np.ptp(frozen.frames[:, :, 33:].astype(int), axis=0).max() == 0
+    assert np.array_equal(frozen.frames[:, :, :32], clip.frames[:, :, :32])
+
+
+def test_a_video_whose_period_points_below_the_range_says_so(pendulum, tmp_path):
+    from physinfer.video import write_video
+
+    _, phenomenon = pendulum
+    clip = render(phenomenon, {"length": 0.1, "damping": 0.0, "amplitude": 20.0, "phase": 0.0}, 6.0)
+    fast = write_video(tmp_path / "fast.mp4", Clip(clip.frames, clip.fps * 2))  # period halved: L / 4
+    done = cli("refine", "--plugin", "pendulum", "--target", str(fast), "--steps", "4", "--out", str(tmp_path / "run"))
+    assert done.returncode == 0, done.stderr
+    said = " ".join(done.stderr.split())
+    assert "at the bound: the video suggests length below 0.1 m" in said
