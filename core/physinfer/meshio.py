@@ -12,12 +12,18 @@ a flag's hoist on the pole at x = y = 0): nothing is rescaled or rotated.
 Everything a user can get wrong (object arrays in an NPZ, a missing frame, a face
 indexing a vertex that does not exist, a NaN) is a :class:`~physinfer.errors.UserInputError`
 naming the file. numpy only.
+
+A file is never trusted with the machine's memory: an NPZ's arrays are sized from their
+``.npy`` headers and the archive's member sizes before anything is loaded (a 2 MB file of
+compressed zeros may declare gigabytes), faces must be integers, and a coordinate beyond
+:data:`MAX_COORDINATE` metres is refused as a unit mistake.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -26,6 +32,11 @@ import numpy as np
 from physinfer.errors import UserInputError
 from physinfer.types import FPS_RANGE, Trajectory
 from physinfer.types import check_fps as types_check_fps
+
+#: The most bytes a trajectory file's arrays may hold once loaded (a long flag: ~10 MB).
+MAX_TRAJECTORY_BYTES = 1 << 30
+#: The farthest a vertex may lie from the origin, in metres.
+MAX_COORDINATE = 1e6
 
 
 def load_trajectory(path: str | Path, fps: float | None = None) -> Trajectory:
@@ -81,11 +92,18 @@ def read_trajectory_npz(path: str | Path) -> Trajectory:
         UserInputError: not an NPZ, object arrays, missing ``vertices``/``faces``/``fps``.
     """
     path = Path(path)
+    check_npz_size(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             names = list(data.files)
             for name in names:
-                data[name]  # noqa: B018 - loading each array is the check
+                array = data[name]  # loading each array is the check
+                if name == "faces" and array.dtype.kind not in "iu":
+                    raise UserInputError(
+                        f"{path}: faces must be integers (vertex indices), got {array.dtype} values"
+                    )
+    except UserInputError:
+        raise
     except ValueError as exc:
         if "allow_pickle" in str(exc) or "Object arrays" in str(exc):
             raise UserInputError(
@@ -102,6 +120,46 @@ def read_trajectory_npz(path: str | Path) -> Trajectory:
             "(expected vertices (T, V, 3), faces (F, 3), fps)"
         )
     return Trajectory.load(path)
+
+
+def check_npz_size(path: Path) -> None:
+    """Refuse an NPZ whose arrays would take more than :data:`MAX_TRAJECTORY_BYTES`, from the
+    ``.npy`` headers and the archive's member sizes alone (nothing is loaded).
+
+    Raises:
+        UserInputError: naming the largest array, its shape and the total.
+    """
+    try:
+        archive = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile):
+        return  # not an archive: np.load says what it is
+    declared: list[tuple[int, str, tuple[int, ...], str]] = []
+    with archive:
+        for info in archive.infolist():
+            name = info.filename.removesuffix(".npy")
+            size = info.file_size  # what the member inflates to, header included
+            shape: tuple[int, ...] = ()
+            dtype = "?"
+            try:
+                with archive.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read = {(1, 0): np.lib.format.read_array_header_1_0,
+                            (2, 0): np.lib.format.read_array_header_2_0}.get(version)  # fmt: skip
+                    if read is not None:
+                        shape, _, kind = read(fh, max_header_size=10_000)
+                        size = max(size, math.prod(shape) * kind.itemsize)
+                        dtype = str(kind)
+            except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+                pass  # a damaged member: np.load names it
+            declared.append((size, name, shape, dtype))
+    total = sum(size for size, *_ in declared)
+    if total > MAX_TRAJECTORY_BYTES:
+        size, name, shape, dtype = max(declared)
+        what = f"{name} {shape} {dtype}" if shape else f"{name} ({size / 1e9:.1f} GB inflated)"
+        raise UserInputError(
+            f"{path} declares {what}, {total / 1e9:.1f} GB of arrays in all; a trajectory file may hold "
+            f"at most {MAX_TRAJECTORY_BYTES / 1e9:.2g} GB, so it is refused before loading"
+        )
 
 
 def check_trajectory(trajectory: Trajectory, source: str) -> None:
@@ -125,6 +183,14 @@ def check_trajectory(trajectory: Trajectory, source: str) -> None:
     if not finite.all():
         frame = int(np.flatnonzero(~finite)[0])
         raise UserInputError(f"{source}: frame {frame} has a NaN or infinite vertex position")
+    far = np.abs(trajectory.vertices).max(axis=(1, 2)) > MAX_COORDINATE
+    if far.any():
+        frame = int(np.flatnonzero(far)[0])
+        value = float(np.abs(trajectory.vertices[frame]).max())
+        raise UserInputError(
+            f"{source}: frame {frame} has a vertex coordinate of {value:g} m, beyond {MAX_COORDINATE:g} m; "
+            "give coordinates in metres"
+        )
 
 
 # ------------------------------------------------------------------------------- OBJ

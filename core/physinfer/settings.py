@@ -71,6 +71,35 @@ def check_seed(value: Any, option: str = "--seed") -> int:
     return value
 
 
+#: Counts the commands' options take, by field name: ``(low, high, option, what)``. Above
+#: ``high`` a command would take the machine's memory (two billion posterior samples) or
+#: read more frames than any clip holds; below ``low`` it has nothing to do.
+COUNT_LIMITS: dict[str, tuple[int, int, str, str]] = {
+    "embedder_frames": (1, 10_000, "--embedder-frames", "the frames an embedder reads"),
+    "samples": (1, 1_000_000, "--samples", "posterior samples"),
+}
+
+
+def check_counts(values: Any) -> None:
+    """Refuse a count of :data:`COUNT_LIMITS` outside its range (``None``: the default).
+
+    Args:
+        values: A mapping of field names to values, or an options dataclass.
+
+    Raises:
+        UserInputError: naming the option, the value and the range.
+    """
+    get = values.get if isinstance(values, dict) else (lambda name: getattr(values, name, None))
+    for name, (low, high, option, what) in COUNT_LIMITS.items():
+        value = get(name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise UserInputError(
+                f"{option} {value}: give a whole number from {low:,} to at most {high:,} ({what})"
+            )
+
+
 def check_range(key: str, value: float, low: float, high: float) -> None:
     """Refuse a value outside ``[low, high]`` (or not finite).
 

@@ -391,9 +391,10 @@ def with_settings(
 
     Raises:
         UserInputError: an options object of another command, a setting ``kind`` lacks
-            (naming the closest one), or a ``seed`` outside 0..2**32-1.
+            (naming the closest one), a ``seed`` outside 0..2**32-1, or a count of
+            :data:`physinfer.settings.COUNT_LIMITS` (``samples``, ``embedder_frames``) out of range.
     """
-    from physinfer.settings import check_seed
+    from physinfer.settings import check_counts, check_seed
 
     base = kind() if options is None else options
     if not isinstance(base, kind):
@@ -407,6 +408,7 @@ def with_settings(
     merged = dataclasses.replace(base, **settings)
     if "seed" in names:  # as the CLI checks every command's --seed
         check_seed(merged.seed)  # type: ignore[attr-defined]
+    check_counts(merged)  # --samples, --embedder-frames: before any work
     return merged
 
 

@@ -17,6 +17,15 @@ from typing import Any
 from physinfer.errors import UserInputError
 
 SPLITS: tuple[str, ...] = ("train", "val", "test")
+#: The most simulations one dataset may plan (FlagSim, the paper's, has 1,235): the plan
+#: holds a few records per simulation, so a mistyped count would take the machine's memory.
+MAX_SIMULATIONS = 1_000_000
+#: The most renders (stored clips) one dataset may plan (FlagSim has 21,300).
+MAX_RENDERS = 10_000_000
+#: The longest side of a stored clip, in pixels.
+MAX_CLIP_SIDE = 4096
+#: The most frames of a stored clip.
+MAX_CLIP_FRAMES = 10_000
 
 
 @dataclass(frozen=True)
@@ -215,6 +224,16 @@ class DatasetPreset:
         new_sims = self.sims if sims is None else _as_split_counts(sims, self.sims)
         if new_sims.total < 1:
             raise UserInputError("--sims must give at least one simulation")
+        if new_sims.total > MAX_SIMULATIONS:
+            raise UserInputError(
+                f"--sims: {new_sims.total} simulations; a dataset holds at most {MAX_SIMULATIONS:,} "
+                "(the paper's FlagSim has 1,235): make several datasets"
+            )
+        if n_frames is not None and not 1 <= n_frames <= MAX_CLIP_FRAMES:
+            raise UserInputError(f"--frames {n_frames}: give 1 to at most {MAX_CLIP_FRAMES:,} frames per clip")
+        if size is not None and not all(1 <= side <= MAX_CLIP_SIDE for side in size):
+            shown = "x".join(map(str, size))
+            raise UserInputError(f"--size {shown}: give 1 to at most {MAX_CLIP_SIDE} pixels a side")
         if seeds_per_theta is not None and (
             isinstance(seeds_per_theta, bool) or not isinstance(seeds_per_theta, int) or seeds_per_theta < 1
         ):
@@ -238,6 +257,12 @@ class DatasetPreset:
             if any(per_sim[split] < 1 for split in SPLITS if new_sims[split] > 0):
                 raise UserInputError("--renders-per-sim must be at least 1")
             renders = SplitCounts(**{split: new_sims[split] * per_sim[split] for split in SPLITS})
+        if renders.total > MAX_RENDERS:
+            option = "--renders-per-sim" if renders_per_sim is not None else "--sims"
+            raise UserInputError(
+                f"{option}: {renders.total} renders; a dataset holds at most {MAX_RENDERS:,} "
+                "(the paper's FlagSim has 21,300): make several datasets"
+            )
         clip_changes: dict[str, int] = {}
         if n_frames is not None:
             clip_changes["n_frames"] = n_frames
@@ -341,6 +366,9 @@ def parse_split_counts(text: str, what: str) -> int | SplitCounts:
         raise UserInputError(f"{what} expects N or TRAIN,VAL,TEST (integers), got {text!r}") from None
     if any(v < 0 for v in values):
         raise UserInputError(f"{what}: counts must not be negative, got {text!r}")
+    largest = MAX_RENDERS if "render" in what else MAX_SIMULATIONS
+    if any(v > largest for v in values):
+        raise UserInputError(f"{what} {text}: at most {largest:,} per dataset; make several datasets")
     if len(values) == 1:
         return values[0]
     if len(values) == 3:
