@@ -61,10 +61,7 @@ def test_embedder_frames_outside_its_range_is_one_line(frames, tmp_path, physinf
         ("refine", "--plugin", "pendulum_lab", "--steps", "1", "--out", tmp_path / "run"),
         ("diagnose", "--plugin", "pendulum_lab", "--out", tmp_path / "diagnosis"),
         ("posterior", "train", "--plugin", "pendulum_lab", "--data", tmp_path, "--out", tmp_path / "q.safetensors"),
-        ("simulate", "--plugin", "pendulum_lab", "--out", tmp_path / "s.mp4"),
     ):  # fmt: skip
-        if command[0] == "simulate":
-            continue  # simulate embeds nothing
         ran = physinfer_cli(*command, "--embedder-frames", frames, "--json")
         _refused(ran, f"--embedder-frames {frames}")
     assert not (tmp_path / "run").exists() and not (tmp_path / "diagnosis").exists()
