@@ -283,12 +283,9 @@ def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Tar
     return base, target
 
 
-#: What ``diagnose`` writes at the top of its ``--out`` (besides its stages' refine runs,
-#: ``effect-NAME/`` and ``calibration-K/``, each a run folder of its own).
-DIAGNOSE_OUTPUTS = (
-    "diagnosis.json", "baseline", "model.json", "maps.png", "gaps.png", "side_by_side.mp4",
-    "limits.json", "report.html",
-)  # fmt: skip
+#: What ``diagnose`` writes atop its ``--out`` (its stages' run folders have manifests of their own).
+DIAGNOSE_OUTPUTS = ("diagnosis.json", "baseline", "model.json", "maps.png", "gaps.png", "side_by_side.mp4",
+                    "limits.json", "report.html")  # fmt: skip
 
 
 def diagnosis_folder(out: Path) -> OutputFolder:
