@@ -66,21 +66,21 @@ def round_trip_distance(embedder: Any, clip: Clip, seed: int) -> float:
     return float(np.sum((clean - degraded) ** 2))
 
 
-def codec_scale(pipeline: Pipeline, params: dict[str, float], target: Target, seed: int) -> float | None:
-    """How far a camera moves an embedding, at the target and at the best fit: the larger
-    of the two (``None``: the best fit could not be re-simulated).
+def codec_distances(pipeline: Pipeline, params: dict[str, float], target: Target, seed: int) -> list[float]:
+    """How far a camera moves an embedding: ``[at the target, at the best fit]`` (only the
+    target's when the best fit cannot be re-simulated).
 
-    Both are versions of "the same video". The target alone is too strict: a real video
-    already went through a camera, and a second pass moves it little (the 25-s ball on a
-    string: 0.0016, while its best fit, 0.5 % from the true length, lies 0.029 away and its
-    render's round trip is 0.06).
+    Both are versions of "the same video"; the verdict takes the larger. The target alone is
+    too strict: a real video already went through a camera, and a second pass moves it little
+    (the 25-s ball on a string: 0.0016, while its best fit, 0.5 % from the true length, lies
+    0.029 away and its render's round trip is 0.06).
     """
+    distances = [round_trip_distance(pipeline.embedder, target.clip, seed)]
     try:
         clip = pipeline.renderer.render(pipeline.simulator.simulate(params, seed=seed), target.render_params)
-        at_fit = round_trip_distance(pipeline.embedder, clip, seed)
     except SimulationFailed:
-        return None
-    return max(at_fit, round_trip_distance(pipeline.embedder, target.clip, seed))
+        return distances
+    return [*distances, round_trip_distance(pipeline.embedder, clip, seed)]
 
 
 def verdict(best_distance: float, floor: float | None, codec: float | None) -> dict[str, Any]:
@@ -109,7 +109,8 @@ def assess_fit(
     """The verdict on a refinement's best fit (see the module docstring)."""
     floor = (noise_floor or {}).get("floor")
     floor = float(floor) if floor is not None and np.isfinite(floor) else None
-    return verdict(best_distance, floor, codec_scale(pipeline, params, target, seed))
+    codec = codec_distances(pipeline, params, target, seed)
+    return {**verdict(best_distance, floor, max(codec)), "codec_distances": codec}
 
 
 def verdict_line(adequacy: dict[str, Any] | None) -> str | None:

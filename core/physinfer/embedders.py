@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from physinfer.errors import UserInputError
+from physinfer.errors import NothingMoves, UserInputError
 from physinfer.roles import Embedder
 from physinfer.types import Clip
 from physinfer.video import prepare_for_embedding
@@ -138,7 +138,10 @@ class MotionSpectrumConfig:
 
     Attributes:
         fps: Frame rate clips are resampled to.
-        n_frames: Fewest frames a clip must have (one second at ``fps`` by default).
+        n_frames: Frames read from the start of a clip (``--embedder-frames``; an amortized
+            estimator is trained on clips of one length); ``None``: the whole clip, up to
+            ``max_seconds``.
+        min_frames: Fewest frames a clip must have (one second at ``fps``).
         max_seconds: Longest stretch read from the start of a clip.
         size: Side of the square a video is framed to before tracking (``prepare``).
         f_min: Lowest frequency of the spectral grid in Hz.
@@ -157,7 +160,8 @@ class MotionSpectrumConfig:
     """
 
     fps: float = 20.0
-    n_frames: int = 20
+    n_frames: int | None = None
+    min_frames: int = 20
     max_seconds: float = 40.0
     size: int = 96
     f_min: float = 0.1
@@ -172,8 +176,10 @@ class MotionSpectrumConfig:
         """Raise :class:`ValueError` on inconsistent settings."""
         if not 0 < self.f_min < self.f_max < self.fps / 2:
             raise ValueError("need 0 < f_min < f_max < fps / 2")
-        if self.n_frames < 8 or self.max_seconds * self.fps < self.n_frames:
-            raise ValueError("need n_frames >= 8 and max_seconds * fps >= n_frames")
+        if self.min_frames < 8 or self.max_seconds * self.fps < max(self.n_frames or 0, self.min_frames):
+            raise ValueError("need min_frames >= 8 and n_frames, min_frames <= max_seconds * fps")
+        if self.n_frames is not None and self.n_frames < self.min_frames:
+            raise ValueError(f"n_frames must be at least {self.min_frames}")
         if not self.widths or min(self.widths) <= 0:
             raise ValueError("widths must be positive")
 
@@ -216,15 +222,15 @@ class MotionSpectrumEmbedder(Embedder):
     roll and every colour and texture leave it unchanged: a real video and a render of the
     same motion embed alike.
 
-    Clips are read whole (up to ``max_seconds``), so a simulation must span as long as its
-    target: phenomena whose simulator takes ``duration_s`` and that set
-    ``duration_from_target`` get that from the host.
+    Clips are read whole (up to ``max_seconds``; the first ``n_frames`` when set), so a
+    simulation must span as long as its target: phenomena whose simulator takes
+    ``duration_s`` and that set ``duration_from_target`` get that from the host.
 
     Args:
         config: Settings.
         model: Ignored (the factory signature).
         device: Ignored (numpy on CPU).
-        n_frames: Fewest frames a clip must have, overriding ``config.n_frames``.
+        n_frames: Frames read, overriding ``config.n_frames`` (``--embedder-frames``).
     """
 
     def __init__(
@@ -239,8 +245,15 @@ class MotionSpectrumEmbedder(Embedder):
         if n_frames is not None:
             self.config = replace(self.config, n_frames=int(n_frames))
         self.config.validate()
-        self.fps, self.n_frames, self.size = self.config.fps, self.config.n_frames, self.config.size
+        self.fps, self.size = self.config.fps, self.config.size
+        self.n_frames = self.config.n_frames or self.config.min_frames  # the fewest a clip needs
         self._grid = np.geomspace(self.config.f_min, self.config.f_max, self.config.n_freqs)
+
+    @property
+    def dimension(self) -> int:
+        """Length of the embedding."""
+        c = self.config
+        return 2 * len(c.widths) * c.n_freqs + c.n_segments + 2 * c.n_times
 
     def track(self, clip: Clip, *, allow_shift: bool = False):  # noqa: ANN201 - MotionTrack, imported lazily
         """The subject's path in ``clip`` at the embedder's frame rate and length
@@ -250,12 +263,13 @@ class MotionSpectrumEmbedder(Embedder):
 
         c = self.config
         clip = resample(clip, c.fps)
-        if clip.n_frames < c.n_frames:
+        if clip.n_frames < self.n_frames:
             raise UserInputError(
                 f"the clip is too short: {clip.n_frames / c.fps:.2f} s; the motion embedder needs at least "
-                f"{c.n_frames / c.fps:.2f} s"
+                f"{self.n_frames / c.fps:.2f} s"
             )
-        return track_motion(Clip(clip.frames[: int(round(c.max_seconds * c.fps))], c.fps), allow_shift=allow_shift)
+        keep = c.n_frames or int(round(c.max_seconds * c.fps))
+        return track_motion(Clip(clip.frames[:keep], c.fps), allow_shift=allow_shift)
 
     #: ``--roi`` means "compare only this region": conditioning freezes the pixels outside it.
     compares_roi_only = True
@@ -263,11 +277,17 @@ class MotionSpectrumEmbedder(Embedder):
     def embed(self, clip: Clip) -> np.ndarray:
         """Embed a clip; returns ``(2 · len(widths) · n_freqs + n_segments + 2 · n_times,)`` float32."""
         c = self.config
-        track = self.track(clip)
+        try:
+            track = self.track(clip)
+        except NothingMoves:
+            # A simulation whose motion no camera would see (a 1° swing of a long pendulum) is
+            # an observation too: the embedding of stillness. A target that does not move is
+            # refused before it is embedded (framing, the phenomenon's video estimate).
+            return np.zeros(self.dimension, dtype=np.float32)
         u, v, _ = track.axes()
         scale = float(np.sqrt(np.mean(u**2)))
         if scale < 1e-6:
-            raise UserInputError("the tracked subject does not move")
+            return np.zeros(self.dimension, dtype=np.float32)
         spectra = smoothed_spectra(np.stack([u, v]) / scale, c.fps, self._grid, c.widths)  # (W, 2, F)
         spectra /= spectra[:, :1].sum(axis=-1, keepdims=True)  # u's spectrum sums to 1 at each width
         segments = np.array_split(u, c.n_segments)

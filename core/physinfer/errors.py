@@ -17,3 +17,11 @@ class UserInputError(PhysinferError, ValueError):
 
 class SimulationFailed(PhysinferError, RuntimeError):
     """A simulation raised, produced NaN or blew up; the refinement records a failed trial."""
+
+
+class NothingMoves(UserInputError):
+    """A clip in which no subject can be tracked (nothing moves, or it leaves the view).
+
+    About a user's video it is said in one line; a motion embedder turns a simulation's
+    (a swing too small to see) into the embedding of stillness instead.
+    """

@@ -167,12 +167,15 @@ def target_duration(pipeline: Pipeline, target: Target) -> float | None:
     """Seconds to simulate so that simulations span as long as ``target``, for a phenomenon
     that asks for it (``duration_from_target``); ``None`` otherwise.
 
-    Capped at what the embedder reads (``config.max_seconds``, where it has one).
+    Capped at what the embedder reads (its ``config.n_frames`` or ``config.max_seconds``,
+    where it has them).
     """
     if not pipeline.phenomenon.duration_from_target:
         return None
     seconds = target.clip.n_frames / float(target.clip.fps)
-    cap = getattr(getattr(pipeline.embedder, "config", None), "max_seconds", None)
+    config = getattr(pipeline.embedder, "config", None)
+    frames = getattr(config, "n_frames", None)
+    cap = frames / float(pipeline.embedder.fps) if frames else getattr(config, "max_seconds", None)
     return round(min(seconds, cap) if cap else seconds, 3)
 
 

@@ -280,6 +280,14 @@ def refine(
         start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
         start_x = space.to_unit({name: start[name] for name in space.names})
         factory = warm_start_factory(factory, start_x)
+    elif (video_start := start_from_video(pipeline, target)) is not None:
+        # What the whole video tells directly (a pendulum's period over 25 s) is sharper than
+        # an estimator that reads its first seconds; the estimator's intervals are still reported.
+        from physinfer.discrepancy.warmstart import warm_start_factory
+
+        start_x, box, run_info["start"] = video_start
+        factory = warm_start_factory(factory, start_x, box)
+        run_info["search_box"] = [[float(v) for v in ends] for ends in box]
     elif amortized is not None:  # spend the budget where the video points
         from physinfer.discrepancy.warmstart import warm_start_factory
         from physinfer.posterior.refined import posterior_start
@@ -288,13 +296,6 @@ def refine(
         start_x = post_start.start_x
         factory = warm_start_factory(factory, start_x, post_start.box)
         run_info["start"] = {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical}
-    elif (video_start := start_from_video(pipeline, target)) is not None:
-        from physinfer.discrepancy.warmstart import warm_start_factory
-
-        start_x, box, run_info["start"] = video_start
-        post_start = None
-        factory = warm_start_factory(factory, start_x, box)
-        run_info["search_box"] = [[float(v) for v in ends] for ends in box]
     # Every trial's coordinates depend on the warm start and the search box: part of the identity.
     run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
     if post_start is not None:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from physinfer.errors import UserInputError
+from physinfer.errors import NothingMoves, UserInputError
 from physinfer.types import Clip
 
 #: Long side, in pixels, that frames are reduced to before tracking.
@@ -212,8 +212,8 @@ def track_motion(clip: Clip, *, side: int = TRACK_SIDE, allow_shift: bool = Fals
     period (a phenomenon's ``video_estimate``) turns it on.
 
     Raises:
-        UserInputError: nothing moves, or the subject is lost in more than a quarter of
-            the frames.
+        NothingMoves: nothing moves, or the subject is lost in more than a quarter of the
+            frames (a :class:`UserInputError`: said in one line about a user's video).
     """
     frames, stride = reduced_frames(clip.frames, side)
     mask, difference, _ = foreground(frames)
@@ -221,10 +221,10 @@ def track_motion(clip: Clip, *, side: int = TRACK_SIDE, allow_shift: bool = Fals
     mass = weight.sum(axis=(1, 2))
     found = mass > 0
     if found.sum() < 2:
-        raise UserInputError("nothing moves in this video: no frame differs from the background")
+        raise NothingMoves("nothing moves in this video: no frame differs from the background")
     lost = int((~found).sum())
     if lost > MAX_LOST * len(frames):
-        raise UserInputError(
+        raise NothingMoves(
             f"the moving subject is lost in {lost} of {len(frames)} frames: give a clip in which "
             "it stays in view (trim it with 'physinfer prepare --start/--duration')"
         )

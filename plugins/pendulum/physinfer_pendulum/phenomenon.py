@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from functools import cache
+from pathlib import Path
 
 from physinfer import Phenomenon, Target
 from physinfer.registry import resolve
+
+#: The shipped amortized estimator (``make posterior-pendulum``): reads the first 8 s of a video.
+DEFAULT_POSTERIOR = Path(__file__).parent / "data" / "posterior_default.safetensors"
 
 #: Ground truth of the embedded target (a 10-s clip), away from the centre of the space.
 DEFAULT_TRUTH = {"length": 0.6, "damping": 0.05, "amplitude": 20.0, "phase": 0.3}
@@ -46,4 +50,5 @@ def make_phenomenon() -> Phenomenon:
         nuisance=NUISANCE,
         duration_from_target=True,
         video_estimate=resolve("physinfer_pendulum.estimate:video_estimate"),
+        default_posterior=str(DEFAULT_POSTERIOR),
     )

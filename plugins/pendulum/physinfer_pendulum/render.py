@@ -129,6 +129,19 @@ class PendulumRenderer(Renderer):
         eye = middle + distance * np.array([0.0, -np.cos(tilt), np.sin(tilt)])
         return look_at(eye, middle)
 
+    def sample_render_params(self, rng: np.random.Generator) -> dict[str, Any]:
+        """Domain randomisation for datasets: every look a phone video may have (the wall, the
+        bob's colour, the light, the framing, the camera's tilt), at the default size."""
+        return {
+            **self.default_render_params,
+            "fill": float(rng.uniform(0.25, 0.8)),
+            "pivot_in_view": int(rng.random() < 0.3),
+            "elevation_deg": float(rng.uniform(-15.0, 15.0)),
+            "light": float(rng.uniform(2.0, 8.0)),
+            "wall": float(rng.uniform(0.2, 0.95)),
+            "bob_hue": float(rng.uniform(0.0, 1.0)),
+        }
+
     def check_render_params(self, render_params: Mapping[str, Any] | None) -> dict[str, Any]:
         """The complete ζ, typed and range-checked (see :class:`PendulumRenderParams`).
 
