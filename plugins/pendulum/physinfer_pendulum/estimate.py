@@ -98,9 +98,10 @@ def video_estimate(clip: Clip, max_amplitude_deg: float = 60.0) -> dict[str, tup
     """
     from physinfer.embedders import MotionSpectrumEmbedder
     from physinfer.errors import UserInputError
-    from physinfer.tracking import half_swings
+    from physinfer.tracking import check_one_mover, half_swings
 
     embedder = MotionSpectrumEmbedder()
+    check_one_mover(clip)
     track = embedder.track(clip, allow_shift=True)
     u, v, _ = track.axes()
     crossings, _ = half_swings(u, embedder.fps)
