@@ -82,6 +82,7 @@ from physinfer.loop import Pipeline, RefineConfig
 from physinfer.noise import noise_seeds
 from physinfer.outputs import OutputFolder
 from physinfer.parameters import refuse_repeats
+from physinfer.pipeline import load_target, target_duration
 from physinfer.progress import StageProgress
 from physinfer.registry import Registry
 from physinfer.roles import Target
@@ -243,7 +244,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     start_time = time.perf_counter()
 
     registry = scene_registry(registry, settings)  # every model is built for the scene
-    base, target = _load(registry, settings)
+    base, target, settings = _load(registry, settings)
     phenomenon = base.phenomenon
     if settings.batch_size is None:  # resolved once: every stage, here and on workers, alike
         if (batch := int(phenomenon.diagnose_batch_size)) < 1:
@@ -272,15 +273,16 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
     return report
 
 
-def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target]:
-    from physinfer.session import load_target
-
+def _load(registry: Registry, settings: DiagnoseSettings) -> tuple[Pipeline, Target, DiagnoseSettings]:
     base = build_base(registry, settings)
     target = load_target(
         base, settings.target_path, fps=settings.fps, truth=settings.truth, render_set=settings.render_set,
         fixed=settings.fixed, conditioning=settings.conditioning,
     )  # fmt: skip
-    return base, target
+    if settings.duration_s is None and (seconds := target_duration(base, target)) is not None:
+        settings = dataclasses.replace(settings, duration_s=seconds)  # as long as the target lasts
+        base = build_base(registry, settings)
+    return base, target, settings
 
 
 #: What ``diagnose`` writes atop its ``--out`` (its stages' run folders have manifests of their own).
