@@ -133,6 +133,19 @@ def test_the_real_ball_on_a_string_gives_its_length_within_3_percent(tmp_path):
     truth = 9.81 * 1.02**2 / (4 * np.pi**2)  # the README's tracked period
     assert result["best_params"]["length"] == pytest.approx(truth, rel=0.03)
     assert result["adequacy"]["reproduces"] is True
+    low, high = result["posterior"]["length"]["ci90"]  # an interval, although the pendulum is deterministic
+    assert low <= truth <= high and high - low < 0.1 * truth
+
+
+def test_infer_answers_the_real_ball_with_an_interval_and_a_verdict(tmp_path):
+    video = real_clip("ball_on_string.mp4")
+    done = cli("infer", "--plugin", "pendulum", "--target", str(video), "--out", str(tmp_path / "infer"), "--json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    truth = 9.81 * 1.02**2 / (4 * np.pi**2)
+    low, high = report["posterior"]["length"]["ci90"]
+    assert low <= truth <= high and report["posterior"]["length"]["label"] == "identified"
+    assert report["adequacy"]["reproduces"] is True
 
 
 def test_a_swing_smaller_than_the_bob_still_gives_its_period(pendulum):
