@@ -49,6 +49,22 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = _Z_UP) -> np.n
     return pose
 
 
+def segment_pose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pose ``(4, 4)`` that maps a unit-height cylinder along z (trimesh's, centred) onto the
+    segment ``a``–``b``: a rod or a string between a pivot and a bob."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    axis = b - a
+    length = float(np.linalg.norm(axis))
+    z = axis / max(length, 1e-9)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x = x / max(np.linalg.norm(x), 1e-9)
+    y = np.cross(z, x)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2] = x, y, z * length
+    pose[:3, 3] = (a + b) / 2
+    return pose
+
+
 def spherical_camera(
     target: np.ndarray, distance: float, azimuth_deg: float, elevation_deg: float
 ) -> np.ndarray:

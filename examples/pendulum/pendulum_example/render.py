@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from physinfer import Clip, Renderer, Trajectory
-from physinfer.rendering import OffscreenContext, look_at, use_headless_gl
+from physinfer.rendering import OffscreenContext, look_at, segment_pose, use_headless_gl
 from physinfer.settings import MappingSettings, check_range
 
 
@@ -91,7 +91,7 @@ class PendulumRenderer(Renderer):
         centres = trajectory.vertices.mean(axis=1)
         bob_poses = np.tile(np.eye(4), (trajectory.n_frames, 1, 1))
         bob_poses[:, :3, 3] = centres - rest
-        rod_poses = np.stack([_rod_pose(pivot, centre) for centre in centres])
+        rod_poses = np.stack([segment_pose(pivot, centre) for centre in centres])
         frames = ctx.render_sequence(scene, poses={bob_node: bob_poses, rod_node: rod_poses})
         return Clip(frames, trajectory.fps)
 
@@ -108,16 +108,3 @@ class PendulumRenderer(Renderer):
             ctx.close()
         self._contexts.clear()
 
-
-def _rod_pose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pose that maps a unit-height cylinder along z onto the segment ``a``–``b``."""
-    axis = b - a
-    length = float(np.linalg.norm(axis))
-    z = axis / max(length, 1e-9)
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x = x / max(np.linalg.norm(x), 1e-9)
-    y = np.cross(z, x)
-    pose = np.eye(4)
-    pose[:3, 0], pose[:3, 1], pose[:3, 2] = x, y, z * length
-    pose[:3, 3] = (a + b) / 2
-    return pose
