@@ -69,6 +69,7 @@ class ClipDataset(Sequence[np.ndarray]):
         self.param_names: list[str] = self.parameter_space.names
         all_rows = read_manifest(self.root)
         _check_counts(self.root, all_rows, info.get("renders"))
+        _check_rows(self.root, all_rows, self.parameter_space)
         self.rows: list[dict[str, Any]] = [row for row in all_rows if split is None or row["split"] == split]
         self.sim_ids = np.array([row["sim"] for row in self.rows], dtype=np.int64)
         self.render_ids = np.array([row["render"] for row in self.rows], dtype=np.int64)
@@ -141,6 +142,45 @@ class ClipDataset(Sequence[np.ndarray]):
         state = self.__dict__.copy()
         state["_shards"] = {}
         return state
+
+
+def _check_rows(root: Path, rows: list[dict[str, Any]], space: ParameterSpace) -> None:
+    """Refuse a manifest row whose θ is not a finite number inside the parameter bounds, or
+    whose ``file`` / ``trajectory`` lies outside the dataset directory (``../../etc/passwd``,
+    an absolute path): a manifest is data, and a training set is only as good as its rows."""
+    where = root / MANIFEST_FILE
+    resolved_root = root.resolve()
+    for number, row in enumerate(rows, start=1):
+        params = row.get("params")
+        if not isinstance(params, dict):
+            raise UserInputError(f"{where}: row {number} has no θ (params); the manifest is damaged")
+        for spec in space:
+            value = params.get(spec.name)
+            low, high = spec.bounds
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+            slack = 1e-9 * max(abs(low), abs(high), 1.0)
+            if not ok or not (low - slack <= float(value) <= high + slack):
+                raise UserInputError(
+                    f"{where}: row {number} (render {row.get('render')}) gives {spec.name}={value!r}, outside its "
+                    f"bounds [{low:g}, {high:g}]; the manifest is damaged or not this dataset's — regenerate it "
+                    f"with `physinfer dataset generate --out {root}`"
+                )
+        for key in ("file", "trajectory"):
+            name = row.get(key)
+            if key == "trajectory" and name is None:
+                continue
+            inside = isinstance(name, str) and bool(name) and not Path(name).is_absolute()
+            if inside:
+                target = (root / name).resolve()
+                inside = target == resolved_root or resolved_root in target.parents
+            if not inside:
+                raise UserInputError(
+                    f"{where}: row {number} names {key} {name!r}, outside {root}; a dataset reads only its own "
+                    "files — regenerate the manifest with `physinfer dataset generate`"
+                )
+        index = row.get("index")
+        if not isinstance(index, int) or isinstance(index, bool) or index < 0:
+            raise UserInputError(f"{where}: row {number} has index {index!r}, not a clip's place in its shard")
 
 
 def _check_counts(root: Path, rows: list[dict[str, Any]], expected: dict[str, int] | None) -> None:

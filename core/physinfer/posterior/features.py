@@ -4,7 +4,10 @@ A dataset made by ``physinfer dataset generate`` stores clips and the θ each wa
 at. Training an estimator needs each clip's embedding ``s(x)``; embedding is the slow part
 (seconds per clip for the flag's front end), so it is done once per (embedder, frames,
 weights, dataset) and kept in ``DATASET/embeddings/<key>-<split>.npz``. An interrupted
-embedding resumes from its last saved chunk (``.partial.npz``).
+embedding resumes from its last saved chunk (``.partial.npz``). Each cached embedding is
+stored with a digest of its bytes together with its clip's identity (shard checksum, size,
+index) and the cache key: a row whose digest does not match — an edited, zeroed or foreign
+cache under the same name — is embedded again rather than trusted.
 """
 
 from __future__ import annotations
@@ -109,7 +112,8 @@ def embed_dataset(
     key = cache_key(dataset, embedder_info)
     final = dataset.root / CACHE_DIR / f"{key}-{split}.npz"
     partial = final.with_suffix(".partial.npz")
-    done_x = _read_cached(final if final.is_file() else partial, len(dataset))
+    clip_ids = _clip_identities(dataset)
+    done_x = _read_cached(final if final.is_file() else partial, key, clip_ids)
     total = len(dataset)
     if len(done_x) < total:
         parts = [done_x] if len(done_x) else []
@@ -119,7 +123,12 @@ def embed_dataset(
             parts.append(_embed_range(dataset, embedder, done, stop))
             done = stop
             x = np.concatenate(parts)
-            atomic_save_npz(final if done == total else partial, x=x, key=np.array(key))
+            atomic_save_npz(
+                final if done == total else partial,
+                x=x,
+                key=np.array(key),
+                digests=np.array(_row_digests(key, clip_ids[: len(x)], x)),
+            )
             if on_progress is not None:
                 on_progress(done, total)
         partial.unlink(missing_ok=True)
@@ -148,16 +157,50 @@ def _scene_context(dataset: ClipDataset) -> np.ndarray:
     ).reshape(len(dataset), len(dataset.scene_ranges))
 
 
-def _read_cached(path: Path, total: int) -> np.ndarray:
-    """The embeddings saved in ``path`` (none when it does not exist or is damaged)."""
+def _clip_identities(dataset: ClipDataset) -> list[str]:
+    """What each clip's cached embedding is bound to: its shard's recorded checksum, the
+    shard's size on disk and the clip's place in it (a regenerated or truncated shard
+    changes it)."""
+    sizes: dict[str, int] = {}
+    ids = []
+    for row in dataset.rows:
+        file = str(row["file"])
+        if file not in sizes:
+            path = dataset.root / file
+            sizes[file] = path.stat().st_size if path.is_file() else -1
+        ids.append(f"{file}|{row['index']}|{row.get('checksum')}|{sizes[file]}")
+    return ids
+
+
+def _row_digests(key: str, clip_ids: list[str], x: np.ndarray) -> list[str]:
+    """``(N,)`` sha256 of each embedding's bytes together with the cache key and its clip."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    return [
+        hashlib.sha256(f"{key}|{clip_id}|{x.shape[1]}|".encode() + x[i].tobytes()).hexdigest()
+        for i, clip_id in enumerate(clip_ids)
+    ]
+
+
+def _read_cached(path: Path, key: str, clip_ids: list[str]) -> np.ndarray:
+    """The leading embeddings saved in ``path`` whose digests match (none when it does not
+    exist, is damaged, or carries no digests): a row that does not match its digest — an
+    edited or zeroed cache — and every row after it are embedded again."""
+    empty = np.zeros((0, 0), dtype=np.float32)
     if not path.is_file():
-        return np.zeros((0, 0), dtype=np.float32)
+        return empty
     try:
         with np.load(path, allow_pickle=False) as data:
             x = np.asarray(data["x"], dtype=np.float32)
-    except (OSError, ValueError, KeyError):
-        return np.zeros((0, 0), dtype=np.float32)  # re-embed rather than trust a damaged file
-    return x if x.ndim == 2 and len(x) <= total else np.zeros((0, 0), dtype=np.float32)
+            stored = [str(d) for d in np.asarray(data["digests"]).reshape(-1)]
+    except (OSError, ValueError, KeyError, EOFError):
+        return empty  # re-embed rather than trust a damaged file or one without digests
+    if x.ndim != 2 or len(x) > len(clip_ids) or len(stored) != len(x) or not np.isfinite(x).all():
+        return empty
+    expected = _row_digests(key, clip_ids[: len(x)], x)
+    good = 0
+    while good < len(x) and stored[good] == expected[good]:
+        good += 1
+    return x[:good] if good else empty
 
 
 def _embed_range(dataset: ClipDataset, embedder: Embedder, start: int, stop: int) -> np.ndarray:
