@@ -158,16 +158,64 @@ def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) 
             stream = container.streams.video[0]
             rate = stream.average_rate or stream.guessed_rate or stream.base_rate
             frames = []
+            times: list[float | None] = []
             for frame in container.decode(stream):
                 width, height = scaled_size(frame.width, frame.height, max_side)
                 frames.append(frame.to_ndarray(width=width, height=height, format="rgb24"))
+                times.append(float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None)
                 if max_frames is not None and len(frames) >= max_frames:
                     break
+            tick = float(stream.time_base) if stream.time_base else 0.0
     except UserInputError:
         raise
     except Exception as exc:  # av raises many types for corrupt input
         raise UserInputError(f"{path}: cannot decode the video ({type(exc).__name__}: {exc})") from None
+    uniform = _uniform_times(path, frames, times, tick, max_frames)
+    if uniform is not None:
+        return uniform
     return frames, float(rate) if rate else None
+
+
+#: Frame intervals that differ from their median by more than this fraction (beyond the
+#: container's time-base rounding) make a video variable-frame-rate.
+VFR_TOLERANCE = 0.10
+
+
+def _uniform_times(
+    path: Path, frames: list[np.ndarray], times: Sequence[float | None], tick: float, max_frames: int | None
+) -> tuple[list[np.ndarray], float] | None:
+    """A variable-frame-rate video's frames resampled at uniform times, or None for a
+    constant-rate one (or one without timestamps).
+
+    A phone's video often drops or stretches frames; read at its average rate, its motion
+    would run at an uneven speed and every duration measured on it would be off. The frame
+    times ``pts × time_base`` are checked: intervals that stray from their median by more
+    than :data:`VFR_TOLERANCE` (plus one time-base tick of rounding) mark the video as
+    variable-rate, and it is resampled at the median interval's rate by taking, at each
+    uniform time, the frame whose timestamp is nearest (a warning says so).
+    """
+    if len(frames) < 3 or any(t is None for t in times):
+        return None
+    t = np.asarray(times, dtype=np.float64)
+    dt = np.diff(t)
+    if not np.all(np.isfinite(dt)) or np.any(dt <= 0):
+        return None  # out-of-order or repeated timestamps: keep the container's rate
+    step = float(np.median(dt))
+    if np.max(np.abs(dt - step)) <= VFR_TOLERANCE * step + tick:
+        return None
+    fps = 1.0 / step
+    n_out = int(np.floor((t[-1] - t[0]) * fps + 1e-9)) + 1
+    if max_frames is not None:
+        n_out = min(n_out, max_frames)
+    uniform = t[0] + np.arange(n_out) / fps
+    right = np.clip(np.searchsorted(t, uniform), 1, len(t) - 1)
+    idx = np.where(uniform - t[right - 1] <= t[right] - uniform, right - 1, right)
+    _log.warning(
+        "warning: %s has a variable frame rate (frame intervals %.1f-%.1f ms); resampled to %.3g fps at uniform "
+        "times (nearest frame), %d frames from %d",
+        path, 1e3 * dt.min(), 1e3 * dt.max(), fps, n_out, len(frames),
+    )  # fmt: skip
+    return [frames[i] for i in idx], fps
 
 
 def _pil_rgb(image: object, max_side: int | None) -> np.ndarray:

@@ -266,3 +266,45 @@ def test_a_static_or_tiny_target_is_refused_with_one_line(tmp_path, physinfer_cl
                          "--out", tmp_path / "run", "--json")  # fmt: skip
     assert proc.returncode == 2 and "nothing moves" in proc.json()["error"]
     assert not (tmp_path / "run" / "trials.jsonl").exists()
+
+
+def _write_vfr(path: Path, times_ms: list[int]) -> None:
+    """An mp4 whose frame i (gray level 20 * i) is shown at ``times_ms[i]``: uneven gaps."""
+    from fractions import Fraction
+
+    import av
+
+    with av.open(str(path), mode="w", format="mp4") as container:
+        stream = container.add_stream("libx264", rate=25)
+        stream.width, stream.height, stream.pix_fmt = 64, 64, "yuv420p"
+        stream.codec_context.time_base = Fraction(1, 1000)
+        stream.options = {"crf": "0", "preset": "veryfast"}
+        for i, ms in enumerate(times_ms):
+            frame = av.VideoFrame.from_ndarray(np.full((64, 64, 3), 20 * i, np.uint8), format="rgb24")
+            frame.pts, frame.time_base = ms, Fraction(1, 1000)
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+
+
+def test_a_variable_frame_rate_video_is_resampled_at_uniform_times(tmp_path: Path, caplog) -> None:
+    path = tmp_path / "vfr.mp4"
+    # 40-ms steps (25 fps) with two dropped stretches of 120 and 200 ms
+    times = [0, 40, 80, 200, 240, 280, 480, 520, 560, 600]
+    _write_vfr(path, times)
+    with caplog.at_level("WARNING"):
+        clip = read_video(path)
+    assert "variable frame rate" in caplog.text
+    assert clip.fps == pytest.approx(25.0, rel=1e-3)
+    assert clip.n_frames == 16  # 0 .. 600 ms every 40 ms
+    levels = clip.frames[:, 32, 32, 0].astype(int)
+    uniform = np.arange(16) * 40
+    nearest = [int(np.argmin(np.abs(np.array(times) - u))) for u in uniform]
+    assert np.allclose(levels, [20 * i for i in nearest], atol=3), levels
+    even = tmp_path / "even.mp4"
+    _write_vfr(even, [40 * i for i in range(10)])  # constant rate: read as stored
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        steady = read_video(even)
+    assert steady.n_frames == 10 and steady.fps == pytest.approx(25.0) and "variable" not in caplog.text
