@@ -421,6 +421,14 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(
 
     clip = read_video(short)
     write_video(short, clip.frames[:30], fps=clip.fps)  # 1.2 s of a 2-s estimator
+    import shutil
+
+    poisoned = tmp_path / "poisoned-set"
+    shutil.copytree(pendulum_set, poisoned, ignore=shutil.ignore_patterns("embeddings"))
+    rows = (poisoned / "manifest.jsonl").read_text().splitlines()
+    last = json.loads(rows[-1])
+    last["params"]["length"] = 1e9  # a test row's θ far outside 0.4-1.6 m
+    (poisoned / "manifest.jsonl").write_text("\n".join([*rows[:-1], json.dumps(last)]) + "\n")
     cases = {
         ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--target", str(short)): "lasts 1.20 s",
         ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum_lab, not flag",
@@ -429,6 +437,7 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(
         ("posterior", "train", "--plugin", "flag", "--data", str(pendulum_set), "--out", str(tmp_path / "f.safetensors")): "generated for --plugin pendulum_lab",
         ("posterior", "train", "--plugin", "pendulum_lab", "--data", str(pendulum_set), "--out", str(tmp_path / "f.pt")): "*.safetensors",
         ("evaluate", "calibration", "--plugin", "pendulum_lab", "--posterior", str(path), "--data", str(tmp_path)): "not a dataset",
+        ("evaluate", "calibration", "--plugin", "pendulum_lab", "--posterior", str(path), "--data", str(poisoned), "--out", str(tmp_path / "cal")): f"row {len(rows)} (render",
     }  # fmt: skip
     for args, message in cases.items():
         proc = physinfer_cli(*args, "--json", cwd=tmp_path)
