@@ -289,4 +289,6 @@ def parse_float_assignments(items: Iterable[str], what: str = "--set") -> dict[s
             out[name] = float(value)
         except ValueError:
             raise UserInputError(f"{what} {name}={value!r}: value is not a number") from None
+        if not np.isfinite(out[name]):
+            raise UserInputError(f"{what} {name}={value}: give a finite number")
     return out

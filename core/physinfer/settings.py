@@ -73,10 +73,24 @@ def check_seed(value: Any, option: str = "--seed") -> int:
 
 #: Counts the commands' options take, by field name: ``(low, high, option, what)``. Above
 #: ``high`` a command would take the machine's memory (two billion posterior samples) or
-#: read more frames than any clip holds; below ``low`` it has nothing to do.
-COUNT_LIMITS: dict[str, tuple[int, int, str, str]] = {
+#: read more frames than any clip holds, or run for ever (``steps=10**20``); below ``low`` it
+#: has nothing to do (``low`` None: the command's own check says what the least is).
+COUNT_LIMITS: dict[str, tuple[int | None, int, str, str]] = {
     "embedder_frames": (1, 10_000, "--embedder-frames", "the frames an embedder reads"),
     "samples": (1, 1_000_000, "--samples", "posterior samples"),
+    "steps": (1, 100_000, "--steps", "trials"),
+    "effect_steps": (None, 100_000, "--effect-steps", "trials per model"),
+    "floor_samples": (None, 10_000, "--floor-samples", "re-simulations"),
+    "noise_samples": (None, 10_000, "--noise-samples", "re-simulations"),
+    "seeds_per_trial": (None, 1_000, "--seeds-per-trial", "seeds per trial"),
+    "select_top": (None, 10_000, "--select-top", "finalists"),
+    "select_seeds": (None, 1_000, "--select-seeds", "seeds per finalist"),
+    "batch_size": (None, 10_000, "--batch-size", "trials per step"),
+    "calibration_runs": (None, 1_000, "--calibration-runs", "calibration refinements"),
+    "workers": (None, 4_096, "--workers", "worker processes"),
+    "max_epochs": (None, 1_000_000, "--max-epochs", "training epochs"),
+    "patience": (None, 1_000_000, "--patience", "epochs"),
+    "ensemble": (None, 100, "--ensemble", "flows"),
 }
 
 
@@ -94,10 +108,10 @@ def check_counts(values: Any) -> None:
         value = get(name)
         if value is None:
             continue
-        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-            raise UserInputError(
-                f"{option} {value}: give a whole number from {low:,} to at most {high:,} ({what})"
-            )
+        whole = not isinstance(value, bool) and isinstance(value, int)
+        if not whole or value > high or (low is not None and value < low):
+            span = f"from {low:,} to at most {high:,}" if low is not None else f"of at most {high:,}"
+            raise UserInputError(f"{option} {value!r}: give a whole number {span} ({what})")
 
 
 def check_range(key: str, value: float, low: float, high: float) -> None:
@@ -128,12 +142,24 @@ def whole_number(value: Any) -> int:
     """An int from an int-valued number or string (the CLI passes numbers as floats).
 
     Raises:
-        ValueError: for a fraction or text that is not a number.
+        ValueError: for a fraction, a bool (``light=true`` is no count) or text that is not
+            a number.
     """
-    number = float(value)
+    number = parse_float(value)
     if not number.is_integer():
         raise ValueError(f"{value!r} is not a whole number")
     return int(number)
+
+
+def parse_float(value: Any) -> float:
+    """A float from a number or a numeric string; ``True``/``False`` are switches, not numbers.
+
+    Raises:
+        ValueError: for a bool or text that is not a number.
+    """
+    if isinstance(value, bool) or type(value).__name__ == "bool_":
+        raise ValueError("expected a number, not true/false")
+    return float(value)
 
 
 def parse_bool(value: Any) -> bool:
@@ -170,7 +196,7 @@ def converter_for(annotation: Any) -> Converter:
         TypeError: for an annotation this module does not support (a programming error,
             reported when the settings are built, not a user mistake).
     """
-    simple: dict[Any, Converter] = {bool: parse_bool, int: whole_number, float: float, str: parse_str}
+    simple: dict[Any, Converter] = {bool: parse_bool, int: whole_number, float: parse_float, str: parse_str}
     if annotation in simple:
         return simple[annotation]
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -408,8 +410,47 @@ def with_settings(
     merged = dataclasses.replace(base, **settings)
     if "seed" in names:  # as the CLI checks every command's --seed
         check_seed(merged.seed)  # type: ignore[attr-defined]
-    check_counts(merged)  # --samples, --embedder-frames: before any work
+    check_counts(merged)  # --steps, --samples, --embedder-frames, ...: before any work
+    _check_types(merged)
+    if getattr(merged, "roi", None) is not None and "target" in names and merged.target is None:  # type: ignore[attr-defined]
+        raise UserInputError(
+            "--roi: give --target too; a region is in the pixels of your video (the phenomenon's own target "
+            "needs none)"
+        )
     return merged
+
+
+#: What each scalar field type accepts, and what to say when a value is not one.
+_SCALARS: dict[str, tuple[Any, str]] = {
+    "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "a whole number"),
+    "float": (
+        lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v),
+        "a finite number",
+    ),
+    "bool": (lambda v: isinstance(v, bool), "True or False"),
+    "str": (lambda v: isinstance(v, str), "a string"),
+    "Path": (lambda v: isinstance(v, (str, os.PathLike)), "a path"),
+}
+
+
+def _check_types(options: Any) -> None:
+    """Refuse a setting of the wrong type, naming its option: ``steps=True``, ``seed="seven"``,
+    ``duration=float("nan")`` (a bool is no count and text no number, though Python would
+    compute with either)."""
+    for f in dataclasses.fields(options):
+        kinds = [part.strip() for part in str(f.type).split("|")]
+        optional = "None" in kinds
+        scalar = [k for k in kinds if k != "None"]
+        value = getattr(options, f.name)
+        if value is None and optional:
+            continue
+        accepted = [_SCALARS[k] for k in scalar if k in _SCALARS]
+        if len(accepted) != len(scalar):
+            continue  # mappings, tuples and unions of them are checked where they are parsed
+        if not any(ok(value) for ok, _ in accepted):
+            wanted = " or ".join(what for _, what in accepted)
+            option = "--" + f.name.replace("_", "-")
+            raise UserInputError(f"{option} {value!r}: give {wanted}{' (or None)' if optional else ''}")
 
 
 def as_assignments(value: Assignments, what: str) -> tuple[str, ...]:
