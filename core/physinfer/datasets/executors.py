@@ -10,10 +10,12 @@ records which ran the units.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Iterator
 from concurrent.futures import Executor, Future
 from contextlib import contextmanager
 from dataclasses import dataclass
+from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
 
 from physinfer.datasets.worker import start_worker
@@ -84,14 +86,13 @@ def open_executor(
     if workers == 0:
         yield InlineExecutor(), ExecutorInfo("inline", 1, None)
         return
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     # spawn, not fork: EGL contexts and torch's thread pools do not survive a fork. The
     # workers die with this process, even when it is killed (start_worker).
     pool = ProcessPoolExecutor(
         max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=worker_context(),
         initializer=start_worker,
         initargs=(threads_per_worker, os.getpid()),
     )
@@ -99,6 +100,60 @@ def open_executor(
         yield pool, ExecutorInfo("processes", workers, threads_per_worker)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+_hiding = threading.local()
+_stdlib_preparation_data: Any = None
+
+
+def _preparation_data(name: str) -> dict[str, Any]:
+    data = _stdlib_preparation_data(name)
+    if getattr(_hiding, "main", False):
+        # The worker must not run the user's script again: spawn imports the parent's
+        # __main__ by path (or module name) in every child, and a script without an
+        # ``if __name__ == "__main__":`` guard would start its refine or diagnose once more
+        # in each worker. physinfer's jobs are physinfer functions; they need no __main__.
+        data.pop("init_main_from_path", None)
+        data.pop("init_main_from_name", None)
+    return data
+
+
+def _launch_without_main(process_obj: Any) -> Any:
+    """``SpawnProcess._Popen`` with the parent's ``__main__`` left out of what the child
+    prepares (only for this launch: the flag is per thread)."""
+    from multiprocessing import popen_spawn_posix, spawn
+
+    global _stdlib_preparation_data
+    if spawn.get_preparation_data is not _preparation_data:
+        _stdlib_preparation_data = spawn.get_preparation_data
+        spawn.get_preparation_data = _preparation_data
+    _hiding.main = True
+    try:
+        return popen_spawn_posix.Popen(process_obj)
+    finally:
+        _hiding.main = False
+
+
+class _WorkerProcess(SpawnProcess):
+    """A spawned process that does not import the parent's ``__main__``."""
+
+    _start_method = "spawn"
+
+    @staticmethod
+    def _Popen(process_obj: Any) -> Any:
+        return _launch_without_main(process_obj)
+
+
+class _WorkerContext(SpawnContext):
+    Process = _WorkerProcess
+
+
+def worker_context() -> SpawnContext:
+    """The multiprocessing context of physinfer's local worker processes: spawn (EGL
+    contexts and torch's thread pools do not survive a fork), whose children start from a
+    fresh interpreter without importing the parent's ``__main__`` (the user's script), so a
+    script that calls the library at its top level runs once."""
+    return _WorkerContext()
 
 
 def _dask_executor(address: str, threads_per_worker: int) -> Iterator[tuple[Executor, ExecutorInfo]]:
