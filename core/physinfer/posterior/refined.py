@@ -273,7 +273,7 @@ def report_posterior(
     trials_x, trials_d = trial_arrays(result, len(space.names))
     floor = (result.extra.get("noise_floor") or {}).get("pairwise") or []
     codec = (result.extra.get("adequacy") or {}).get("codec_distances") or []
-    if len(codec) >= 2 and not any(floor):
+    if len(codec) >= 2 and floor and not any(floor):  # measured, and all zero
         # A deterministic phenomenon re-simulates to the same clip (floor 0): two versions of one
         # video then differ by what a camera does to it (the verdict's round trips).
         floor = list(codec)
