@@ -1,6 +1,6 @@
 """False alarms of the adequacy verdict on clean simulated targets.
 
-Draws ``--targets`` θ uniformly in the normalised cube (seed ``300_000 + i``), simulates
+Draws ``--targets`` θ uniformly in the normalised cube (seed ``300_000 + i``, ``i`` from ``--first``), simulates
 and renders each at the phenomenon's default ζ, writes it to mp4 as a user's video would
 arrive, refines it with ``physinfer refine`` defaults and records the adequacy statistic.
 A target that the model made itself must be reproduced: every ``reproduces: false`` is a
@@ -31,6 +31,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plugin", default="pendulum")
     parser.add_argument("--targets", type=int, default=10)
+    parser.add_argument("--first", type=int, default=0, help="index of the first target (its seed 300_000 + index)")
     parser.add_argument("--duration", type=float, default=None, help="seconds each target lasts")
     parser.add_argument("--out", type=Path, default=Path("runs/bench_adequacy"))
     args = parser.parse_args()
@@ -45,7 +46,7 @@ def main() -> None:
     if any(args.out.iterdir()):
         parser.error(f"--out {args.out} is not empty: give a new folder")
     rows = []
-    for i in range(args.targets):
+    for i in range(args.first, args.first + args.targets):
         theta = space.from_unit(np.random.default_rng(300_000 + i).uniform(-1, 1, len(space.names)))
         video = write_video(args.out / f"target{i}.mp4", renderer.render(simulator.simulate(theta, seed=i)))
         run = args.out / f"run{i}"
