@@ -450,7 +450,7 @@ def _check_types(options: Any) -> None:
         if not any(ok(value) for ok, _ in accepted):
             wanted = " or ".join(what for _, what in accepted)
             option = "--" + f.name.replace("_", "-")
-            raise UserInputError(f"{option} {value!r}: give {wanted}{' (or None)' if optional else ''}")
+            raise UserInputError(f"{option} {value!r}: give {wanted}{' or leave it out' if optional else ''}")
 
 
 def as_assignments(value: Assignments, what: str) -> tuple[str, ...]:

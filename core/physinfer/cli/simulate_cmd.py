@@ -63,4 +63,4 @@ def simulate_cmd(
         emit_json(sim.to_dict())
     else:
         written = ", ".join(str(p) for p in (out, trajectory_out) if p)
-        err_console.print(f"wrote {written}", markup=False, highlight=False)
+        err_console.print(f"wrote {written}", markup=False, highlight=False, soft_wrap=True)  # a path stays whole
