@@ -73,11 +73,6 @@ def fitted_swing(u: np.ndarray, fps: float) -> tuple[float, float, float, float]
     return float(frequency), float(rate), float(np.hypot(a, b)), float((-np.arctan2(b, a) / (2 * np.pi)) % 1.0)
 
 
-def fitted_frequency(u: np.ndarray, fps: float) -> float:
-    """The frequency (Hz) of the damped sinusoid that fits ``u`` best (least squares)."""
-    return fitted_swing(u, fps)[0]
-
-
 def swing_angle(u: np.ndarray, v: np.ndarray, fps: float, frequency: float, rate: float) -> float:
     """The swing's angular amplitude (degrees) from the arc's curvature: across the swing the
     bob rises at twice the frequency by ``L(1 - cos φ)``, so ``A_v(2f) / A_u(f) ≈ φ₀ / 4``
@@ -98,10 +93,10 @@ def video_estimate(clip: Clip, max_amplitude_deg: float = 60.0) -> dict[str, tup
     """
     from physinfer.embedders import MotionSpectrumEmbedder
     from physinfer.errors import UserInputError
-    from physinfer.tracking import check_one_mover, half_swings
+    from physinfer.tracking import half_swings
 
+    # Two movers were refused on the whole video before framing (conditioning.check_one_subject).
     embedder = MotionSpectrumEmbedder()
-    check_one_mover(clip)
     track = embedder.track(clip, allow_shift=True)
     u, v, _ = track.axes()
     crossings, _ = half_swings(u, embedder.fps)
