@@ -19,6 +19,7 @@ import numpy as np
 
 from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
 from physinfer.discrepancy.gap import measure_gap
+from physinfer.discrepancy.ridge import search_starts
 from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement
@@ -109,6 +110,7 @@ def run_stage(
     seed: int | None = None,
     on_trial: OnTrial | None = None,
     embed_clips: ClipEmbedder | None = None,
+    extra_starts: Sequence[Mapping[str, float]] = (),
 ) -> RefineResult:
     """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
 
@@ -124,12 +126,15 @@ def run_stage(
         seed: Optimizer and simulation seed (``None``: the diagnosis seed).
         on_trial: Progress: called with ``(name, trials done, steps)`` after each trial.
         embed_clips: Where the selection's re-simulations run (``None``: here).
+        extra_starts: Physical points tried right after ``start``, before the optimizer's
+            own proposals (an effect's ridge starts, :mod:`physinfer.discrepancy.ridge`).
     """
     seed = settings.seed if seed is None else seed
     space = pipeline.simulator.parameter_space
     factory = registry.get("optimizers", settings.optimizer).load()
     if start is not None:
-        factory = warm_start_factory(factory, space.to_unit(space.complete(start)))
+        extra = [space.to_unit(space.complete(p)) for p in extra_starts]
+        factory = warm_start_factory(factory, space.to_unit(space.complete(start)), extra=extra)
     run_dir = RunDirectory(settings.out / name)
     run_info = {
         "plugin": settings.plugin,
@@ -144,6 +149,7 @@ def run_stage(
         "truth": target.truth,
         "start": None if start is None else {k: float(v) for k, v in start.items()},
         "stage": name,
+        **({"extra_starts": [{k: float(v) for k, v in p.items()} for p in extra_starts]} if extra_starts else {}),
         **optional_settings(
             fixed_by_user(pipeline, settings.fixed), settings.duration_s, settings.embedder_frames
         ),
@@ -418,9 +424,12 @@ def effect_stage(
     pipeline = augmented_pipeline(
         base, [effect], settings.duration_s, fixed_by_user(base, settings.fixed)
     )
+    start, extra = warm_start(baseline_best, [effect]), []
+    if (ridge := search_starts(settings.out, name, baseline_best, start, effect_steps)) is not None:
+        start, extra = ridge  # where the video points along the effect's ridge (ridge.json)
     result = run_stage(
         f"effect-{name}", pipeline, target, registry=registry, settings=settings, steps=effect_steps,
-        start=warm_start(baseline_best, [effect]), target_label=target_label, on_trial=on_trial,
+        start=start, target_label=target_label, on_trial=on_trial, extra_starts=extra,
     )  # fmt: skip
     gap = gaps.measure(pipeline, result.best_params, f"effect-{name}")
     return Stage(name, pipeline, result, gap, n_params=len(effect.parameter_space))

@@ -28,11 +28,18 @@ map then sends ``[-1, 1]`` onto ``[lo, hi]`` (``x = c + z (hi - c)`` for ``z ≥
 refinement started from an amortized posterior searches the region its samples cover for
 the parameters the video determines (:func:`physinfer.posterior.refined.search_box`) and the
 whole range for the others. Without a box the map is the one above, bit for bit.
+
+``extra`` points (space coordinates) are proposed before the inner optimizer's own, one per
+asked trial, after the warm start: a diagnosis hands an effect's search the points along
+the ridge it shares with the base parameters (:mod:`physinfer.discrepancy.ridge`), so that
+the search does not keep to the basin of the warm start. They are attached to the inner
+optimizer (Ax counts them among its initial design). A resumed run replays them as logged
+trials, and those already logged are not proposed again. Without ``extra`` nothing changes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -51,10 +58,16 @@ class WarmStartOptimizer(Optimizer):
         start: ``(D,)`` warm-start point in ``[-1, 1]^D``; the first trial.
         box: ``(lo, hi)``, each ``(D,)`` with ``-1 ≤ lo < hi ≤ 1``: the region searched
             (default: all of ``[-1, 1]^D``).
+        extra: ``(D,)`` points in ``[-1, 1]^D`` proposed, in order, before the inner
+            optimizer's own (held inside the box).
     """
 
     def __init__(
-        self, inner: Optimizer, start: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None = None
+        self,
+        inner: Optimizer,
+        start: np.ndarray,
+        box: tuple[np.ndarray, np.ndarray] | None = None,
+        extra: Sequence[np.ndarray] = (),
     ) -> None:
         super().__init__(dim=inner.dim, seed=inner.seed, names=inner.names)
         start = np.asarray(start, dtype=float).reshape(-1)
@@ -70,6 +83,9 @@ class WarmStartOptimizer(Optimizer):
         margin = (1.0 - CENTRE_LIMIT) / 2.0 * (self.hi - self.lo)  # 0.5 on [-1, 1]
         self.centre = np.clip(self.start, self.lo + margin, self.hi - margin)
         self._first = True
+        # Each extra point as the map sends it back: what a logged trial holds on resume.
+        self._extra = [self.to_x(self.to_z(np.clip(np.asarray(p, dtype=float).reshape(-1), self.lo, self.hi)))
+                       for p in extra]  # fmt: skip
 
     def to_x(self, z: np.ndarray) -> np.ndarray:
         """Inner coordinates ``z`` → space coordinates ``x`` (both ``(D,)`` in ``[-1, 1]``)."""
@@ -89,14 +105,22 @@ class WarmStartOptimizer(Optimizer):
     def attach(self, x: np.ndarray) -> Trial:
         """Attach ``x`` (space coordinates); the loop's first centre trial is the warm start."""
         x = np.asarray(x, dtype=float)
-        z = self.to_z(self.start if self._first and not np.any(x) else x)
+        first = self._first
+        z = self.to_z(self.start if first and not np.any(x) else x)
         self._first = False
+        if not first and self._extra and np.allclose(x, self._extra[0], rtol=0.0, atol=1e-9):
+            self._extra.pop(0)  # a resumed run's logged extra point: not proposed again
         return self._outer(self.inner.attach(z))
 
     def ask(self, n: int = 1) -> list[Trial]:
-        """Proposals of the wrapped optimizer, in space coordinates."""
+        """The extra points not yet tried, then proposals of the wrapped optimizer, in space coordinates."""
         self._first = False
-        return [self._outer(t) for t in self.inner.ask(n)]
+        trials = []
+        while self._extra and len(trials) < n:
+            trials.append(self._outer(self.inner.attach(self.to_z(self._extra.pop(0)))))
+        if len(trials) < n:
+            trials += [self._outer(t) for t in self.inner.ask(n - len(trials))]
+        return trials
 
     def tell(self, index: int, value: float | None, sem: float | None = None) -> None:
         """Delegate to the wrapped optimizer."""
@@ -104,12 +128,15 @@ class WarmStartOptimizer(Optimizer):
 
 
 def warm_start_factory(
-    factory: Callable[..., Optimizer], start: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None = None
+    factory: Callable[..., Optimizer],
+    start: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray] | None = None,
+    extra: Sequence[np.ndarray] = (),
 ) -> Callable[..., Optimizer]:
-    """An optimizer factory like ``factory`` whose optimizers start at ``start`` (and search
-    ``box`` when given)."""
+    """An optimizer factory like ``factory`` whose optimizers start at ``start`` (search
+    ``box`` and propose ``extra`` first, when given)."""
 
     def build(**kwargs: Any) -> Optimizer:
-        return WarmStartOptimizer(factory(**kwargs), start, box)
+        return WarmStartOptimizer(factory(**kwargs), start, box, extra)
 
     return build

@@ -144,6 +144,9 @@ class DiagnoseSettings:
             view and a longer clip).
         screen: Leave out the candidates whose signature at the baseline's fit no fit could
             name, before they are refined (:mod:`physinfer.discrepancy.screen`).
+        ridge_starts: Start each effect's search where the video points along the ridge it
+            shares with the base parameters, not only at the baseline's fit
+            (:mod:`physinfer.discrepancy.ridge`; ``False``: the baseline's fit alone).
         scene_set: The scene's known settings (``--scene-set``; see :mod:`physinfer.scene`),
             bound to every model of the diagnosis and recorded in each stage's ``run.json``
             and in ``model.json``.
@@ -193,6 +196,7 @@ class DiagnoseSettings:
     limits: bool = True
     limit_config: LimitConfig = field(default_factory=LimitConfig)
     screen: bool = True
+    ridge_starts: bool = True
     scene_set: Mapping[str, Any] = field(default_factory=dict)
     workers: int | None = None
     scheduler: str | None = None
@@ -360,6 +364,12 @@ def _diagnose_stages(
         screened = {name: record for name, record in screens.items() if record["screened"]}
     refined = {name: effect for name, effect in effect_objs.items() if name not in screened}
     effects = list(refined)
+    if settings.ridge_starts:
+        from physinfer.discrepancy.ridge import ridge_starts
+
+        with clock.stage("ridge"):
+            ridge_starts(settings, base, target.render_params, baseline.best_params, target_embedding, gap0.floor,
+                         refined, say, pool)  # fmt: skip
 
     # The stages below start from the baseline's fit and not from each other: side by side
     # on workers first, if there are any; the pass below then reads them from disk.

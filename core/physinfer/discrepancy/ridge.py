@@ -1,0 +1,224 @@
+"""Ridge starts: where an effect's model should begin its search, found from the video.
+
+An augmented model is warm-started at the baseline's best θ with the effect off. When the
+effect trades off with a base parameter — drag and restitution both take height off a
+ball's bounces, drag and damping both shorten a swing — the baseline's fit sits at one end of
+a ridge of near-equal distances, and the effect's true strength may lie far along it, with
+the base parameters moved to make up for the effect. A budget-limited search started at the
+baseline fit then keeps to the baseline's basin: on a bouncing ball with drag (restitution
+0.8, drag 0.8 1/m) the drag model's 20 trials ended at drag 0 with the baseline's gap.
+
+So before the effects are refined, each effect is switched on at a few strengths along its
+path (the detection ladder's path, :func:`physinfer.discrepancy.ladder.strength_path`, and
+for a signed effect — an interior *off* such as a yaw of 0° — both directions) at θ̂, and at
+each strength the base parameters are refit to the **target** (not to the baseline): a
+Gauss–Newton step on a forward-difference Jacobian of the baseline's embedding at θ̂ (shared
+by every effect), a line search along it and Gauss–Newton polish on the Jacobian updated by
+Broyden's rule, continued from one strength to the next. Each strength's refit is a point
+on the ridge where the video points; the effect's search then starts at the best of them
+or at θ̂ (whichever is closer to the target) and has the others as its first trials, so
+that the optimizer's model of the distance sees the ridge from the start
+(:class:`physinfer.discrepancy.warmstart.WarmStartOptimizer`, ``extra``). The budget is the
+same: the starts replace some of the optimizer's own initial draws (Ax's Sobol points).
+
+Written to ``ridge.json`` in the diagnosis folder (keyed by θ̂, the effects and the seeds) by
+the main process, and read there by every effect stage wherever it runs, so a resumed or
+parallel diagnosis starts each search from the same points.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from physinfer.discrepancy.ladder import Probe, strength_path, values_at
+from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
+from physinfer.io import atomic_write_json
+from physinfer.loop import squared_distance
+from physinfer.noise import noise_seeds
+from physinfer.parameters import ParameterSpace
+
+if TYPE_CHECKING:
+    from physinfer.discrepancy.parallel import WorkerPool
+    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.loop import Pipeline
+
+Log = Callable[[str], None]
+
+RIDGE_FILE = "ridge.json"
+#: Strengths along the effect's path (fractions from off to the far end of its range).
+FRACTIONS = (0.25, 0.5, 1.0)
+#: Lengths of the linear refit's step tried from each strength's rung (the embedding
+#: saturates: on the ball the linear step went a third of the way to the ridge).
+MULTIPLIERS = (1.0, 2.0, 4.0)
+#: Gauss–Newton steps after the line search, per strength.
+POLISH = 2
+#: Jacobian step in normalised units (the detection ladder's).
+JACOBIAN_STEP = 0.4
+#: Starts handed to a search besides its first trial, at most.
+MAX_EXTRA = 4
+
+
+def effect_paths(space: ParameterSpace) -> list[tuple[dict[str, tuple[float, float]], dict[str, float]]]:
+    """The paths a ridge probe follows: the ladder's, and for a signed effect (a moved
+    parameter whose *off* lies inside its range) the mirrored one too."""
+    moved, held = strength_path(space)
+    paths = [(moved, held)]
+    if any(abs(abs(off) - 1.0) > 1e-9 for off, _ in moved.values()):
+        paths.append(({n: (off, -on) for n, (off, on) in moved.items()}, held))
+    return paths
+
+
+def _distance(goal: np.ndarray, embeddings: np.ndarray) -> float:
+    rows = embeddings[np.isfinite(embeddings).all(axis=1)]
+    return float(np.median([squared_distance(goal, r) for r in rows])) if len(rows) else float("inf")
+
+
+def probe_seeds(seed: int, n: int) -> list[int]:
+    """Seeds of the ridge probe, apart from the trials', the gaps' and the ladder's."""
+    return noise_seeds(seed + 13, n, salt=0x21D6E)
+
+
+def _refit_to_target(
+    probe: Probe,
+    model: Pipeline,
+    space: ParameterSpace,
+    effect_values: Mapping[str, float],
+    goal: np.ndarray,
+    state: RefitState,
+    u0: np.ndarray,
+    seeds: Sequence[int],
+    keep: np.ndarray,
+) -> list[tuple[np.ndarray, float]]:
+    """The base parameters refit to ``goal`` with the effect held at ``effect_values``: every
+    point visited (normalised base coordinates) and its distance to the target."""
+    visited: list[tuple[np.ndarray, np.ndarray, float]] = []
+
+    def visit(u: np.ndarray, origin: tuple[np.ndarray, np.ndarray] | None) -> bool:
+        if any(np.max(np.abs(u - p)) < 1e-3 for p, _, _ in visited):
+            return False
+        emb, _ = probe.clips(model, [{**space.from_unit(u), **effect_values}] * len(seeds), seeds)
+        if origin is not None:
+            state.broyden(u - origin[0], np.nanmean(emb, axis=0) - np.nanmean(origin[1], axis=0))
+        visited.append((u, emb, _distance(goal, emb)))
+        return True
+
+    starts = [u0] if np.allclose(state.u, u0) else [u0, state.u]
+    for u in starts:  # the rung at θ̂, and at the previous strength's refit (a continuation)
+        visit(u, None)
+    first = min(visited, key=lambda v: v[2])
+    delta = linear_refit(state.jac, goal - np.nanmean(first[1], axis=0), first[0], keep)
+    for t in MULTIPLIERS:
+        visit(np.clip(first[0] + t * delta, -1.0, 1.0), (first[0], first[1]))
+    for _ in range(POLISH):
+        best = min(visited, key=lambda v: v[2])
+        step = linear_refit(state.jac, goal - np.nanmean(best[1], axis=0), best[0], keep)
+        if not visit(np.clip(best[0] + step, -1.0, 1.0), (best[0], best[1])):
+            break
+    best = min(visited, key=lambda v: v[2])
+    state.u, state.emb = best[0], best[1]
+    return [(u, d) for u, _, d in visited]
+
+
+def ridge_starts(
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    render_params: Mapping[str, Any],
+    theta: Mapping[str, float],
+    target_embedding: np.ndarray,
+    floor: float,
+    effect_objs: Mapping[str, Any],
+    say: Log,
+    pool: WorkerPool | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Each effect's ridge probe at θ̂ (cached in ``ridge.json``): effect name → ``starts``
+    (physical θ of the augmented model, best first, each with its ``distance`` to the
+    target) and ``baseline_distance`` (θ̂'s, under the same seeds).
+
+    Args:
+        settings: The diagnosis settings (``out``, ``seed``, ``fixed``, ``duration_s``).
+        base: The baseline model.
+        render_params: The target's ζ.
+        theta: θ̂, the baseline's best fit.
+        target_embedding: The target's embedding.
+        floor: The noise floor at θ̂ (0: deterministic, one seed a point; else two).
+        effect_objs: The effects to probe.
+        say: Progress lines.
+        pool: The diagnosis' workers (each clip a job when it has two or more).
+    """
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.discrepancy.clip_jobs import pooled_probes
+    from physinfer.session import fixed_by_user
+
+    if not effect_objs:
+        return {}
+    space = base.simulator.parameter_space
+    theta = {k: float(v) for k, v in space.complete(theta).items()}
+    seeds = probe_seeds(settings.seed, 1 if floor <= 0 else 2)
+    key = {"theta": theta, "effects": sorted(effect_objs), "seeds": seeds, "fractions": list(FRACTIONS),
+           "multipliers": list(MULTIPLIERS), "polish": POLISH}  # fmt: skip
+    path = settings.out / RIDGE_FILE
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key:
+            return stored["effects"]
+    say(f"      ridge starts: {len(effect_objs)} effect(s) switched on along their range, the base refit to the video")
+    pooled = pooled_probes(pool, base, render_params)
+    probe = pooled(False) if pooled is not None else Probe(base, render_params)
+    goal = np.asarray(target_embedding, dtype=np.float64)
+    emb0, _ = probe.clips(base, [theta] * len(seeds), seeds)
+    jac, _ = jacobian(probe, theta, emb0, seeds, JACOBIAN_STEP)
+    d0 = _distance(goal, emb0)
+    u0 = space.to_unit(theta)
+    fixed = fixed_by_user(base, settings.fixed)
+    keep = np.array([name not in fixed for name in space.names])
+    result: dict[str, dict[str, Any]] = {}
+    for name, effect in effect_objs.items():
+        model = augmented_pipeline(base, [effect], settings.duration_s, fixed)
+        points: list[dict[str, Any]] = []
+        for moved, held in effect_paths(effect.parameter_space):
+            state = RefitState(jac.copy(), u0.copy(), emb0)
+            for fraction in FRACTIONS:
+                values = values_at(effect.parameter_space, moved, held, fraction)
+                visited = _refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
+                u, d = min(visited, key=lambda v: v[1])
+                points.append({"params": {**space.from_unit(u), **values}, "distance": d, "fraction": fraction,
+                               "direction": {n: on for n, (_, on) in moved.items()}})  # fmt: skip
+        points.sort(key=lambda p: p["distance"])
+        result[name] = {"starts": points, "baseline_distance": d0}
+        best = points[0] if points else None
+        if best is not None:
+            shown = ", ".join(f"{k} {v:.3g}" for k, v in best["params"].items())
+            say(f"      {name}: closest ridge point {shown} (distance {best['distance']:.4g}; θ̂ {d0:.4g})")
+    atomic_write_json(path, {"key": key, "effects": result, "simulations": probe.simulations})
+    return json.loads(path.read_text())["effects"]
+
+
+def search_starts(
+    out: Path, name: str, baseline_best: Mapping[str, float], off_start: Mapping[str, float], steps: int
+) -> tuple[dict[str, float], list[dict[str, float]]] | None:
+    """The warm start and the extra first trials of effect ``name``'s search from ``ridge.json``
+    (``None`` when there is none for this θ̂: the search starts at ``off_start`` alone).
+
+    The search starts at the closest of θ̂ with the effect off and the ridge points; the
+    others follow as its first trials (at most :data:`MAX_EXTRA`, and a quarter of the
+    budget), the closest first, θ̂ among them when a ridge point led."""
+    path = out / RIDGE_FILE
+    if not path.is_file():
+        return None
+    stored = json.loads(path.read_text())
+    theta = stored.get("key", {}).get("theta", {})
+    if not theta or any(abs(float(baseline_best.get(k, np.nan)) - v) > 1e-12 for k, v in theta.items()):
+        return None
+    record = stored.get("effects", {}).get(name)
+    if not record:
+        return None
+    candidates = [(float(p["distance"]), dict(p["params"])) for p in record["starts"]]
+    candidates.append((float(record["baseline_distance"]), dict(off_start)))
+    candidates.sort(key=lambda c: c[0])  # stable: a ridge point equal to θ̂ stays first
+    n_extra = min(MAX_EXTRA, max(0, steps // 4), len(candidates) - 1)
+    return candidates[0][1], [p for _, p in candidates[1 : 1 + n_extra]]
