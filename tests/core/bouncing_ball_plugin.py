@@ -16,7 +16,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from physinfer import Clip, ParameterSpace, ParameterSpec, Phenomenon, Renderer, Simulator, Target, Trajectory
+from physinfer import (
+    Clip,
+    ParameterSpace,
+    ParameterSpec,
+    Phenomenon,
+    Renderer,
+    Simulator,
+    Target,
+    Trajectory,
+)
 from physinfer.hooks import hookimpl
 from physinfer.roles import Effect
 

@@ -203,6 +203,8 @@ def diagnose_cmd(
     err_console.print(f"[bold]named effect[/] {named}", highlight=False)
     if leaves := report.get("named_leaves"):
         err_console.print(f"  [yellow]but[/] {escape(leaves['message'])}", highlight=False)
+    if unnamed := report.get("unnamed"):
+        err_console.print(f"  {escape(unnamed['message'])}", highlight=False)
     err_console.print(timing_line(report), highlight=False)
 
 

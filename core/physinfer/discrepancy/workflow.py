@@ -48,6 +48,7 @@ from physinfer.discrepancy.calibration_stage import (
     limit_scale,
     scale_text,
 )
+from physinfer.discrepancy.candidates import warm_start
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import (
     DecisionRule,
@@ -75,6 +76,7 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
     effect_stage,
     run_stage,
 )
+from physinfer.discrepancy.unnamed import closest_unnamed, search_end
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
@@ -446,6 +448,13 @@ def _diagnose_stages(
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
             cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+    unnamed = closest_unnamed(
+        candidates, {s.label: _search_end(s, baseline.best_params) for s in stages[1:]},
+        misspecified=bool(verdict["misspecified"]), named=named, baseline_best=before.best_params,
+        effect_steps=effect_steps, clip_seconds=None if limits is None else limits.get("clip_seconds"),
+    )  # fmt: skip
+    if unnamed is not None:
+        say("      " + unnamed["message"])
     say("[6/6] localising and writing outputs")
 
     with clock.stage("outputs"):
@@ -454,6 +463,7 @@ def _diagnose_stages(
             baseline,
         )
     report["named_leaves"] = remainder
+    report["unnamed"] = unnamed
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}
@@ -467,6 +477,14 @@ def _diagnose_stages(
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
+
+
+def _search_end(stage: Stage, baseline_best: Mapping[str, float]) -> dict[str, Any]:
+    """Where an effect's search ended against the baseline's fit with the effect off."""
+    effects = stage.pipeline.effects
+    names = [n for effect in effects for n in effect.parameter_space.names]
+    start = warm_start(baseline_best, list(effects))
+    return search_end(stage.pipeline.simulator.parameter_space, stage.result.best_params, start, names)
 
 
 def _judge(

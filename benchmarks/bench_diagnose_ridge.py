@@ -1,0 +1,129 @@
+"""Benchmark of ``diagnose`` on an effect that trades off with a base parameter (issue 46).
+
+The test plugin ``bouncing_ball`` (tests/core/bouncing_ball_plugin.py): restitution and drop
+height, and the effect ``ball_drag`` (quadratic drag ``drag_k``), which takes height off each
+bounce as a lower restitution does. For each seed a base θ is drawn (restitution 0.6–0.85,
+height 1.2–1.8 m) and a target is made at each ``--strengths`` value of ``drag_k`` (0: the
+clean target), written to MP4 (64 px), and diagnosed with the phenomenon's defaults
+(``--seed`` = the case's seed, one worker unless ``--workers``). ``--no-ridge-starts``
+diagnoses as before the ridge starts (each effect's search from the baseline fit alone).
+
+Prints one JSON object: ``cases`` (one row each: truth, named, misspecified, the drag
+model's gap ratio and fitted drag, the stated limit ``detectable_from``, wall time),
+``by_strength`` (named / cases), ``clean_limits`` (each seed's clean target's limit),
+``half_way`` (the strength named half the time, interpolated linearly between strengths)
+and ``false_discoveries`` (clean targets called misspecified or given a name). Each case's
+row is kept in ``<out>/<case>/case.json``, and a case found there is not run again.
+
+Example (docs/benchmarks.md, "Diagnose: effects on a ridge")::
+
+    PYOPENGL_PLATFORM=egl nice -n 5 .venv/bin/python benchmarks/bench_diagnose_ridge.py \\
+        --seeds 5 --strengths 0 0.1 0.2 0.4 0.8 --out /tmp/bench_ridge
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def truth_of(seed: int, drag: float) -> dict[str, float]:
+    """The target's θ: a seeded base θ, the drag switched in when ``drag > 0``."""
+    rng = np.random.default_rng([seed, 46])
+    truth = {"restitution": float(rng.uniform(0.6, 0.85)), "height": float(rng.uniform(1.2, 1.8))}
+    return {**truth, "drag_k": float(drag)} if drag > 0 else truth
+
+
+def run_case(out: Path, seed: int, drag: float, args: argparse.Namespace) -> dict[str, Any]:
+    """Diagnose one target (or read its row back)."""
+    from bouncing_ball_plugin import ball_registry, ball_target
+
+    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+
+    case = out / f"seed{seed}-drag{drag:g}"
+    row_file = case / "case.json"
+    if row_file.is_file():
+        return json.loads(row_file.read_text())
+    case.mkdir(parents=True, exist_ok=True)
+    truth = truth_of(seed, drag)
+    target = ball_target(truth, case / "target.mp4")
+    settings = DiagnoseSettings(
+        plugin="bouncing_ball", out=case / "diagnosis", target_path=Path(target), seed=seed, workers=args.workers,
+        videos=False, ridge_starts=not args.no_ridge_starts, registry_factory=ball_registry,
+    )  # fmt: skip
+    start = time.perf_counter()
+    report = run_diagnosis(ball_registry(), settings)
+    cand = next((c for c in report["candidates"] if c["effect"] == "ball_drag"), {})
+    row = {
+        "seed": seed, "drag": drag, "truth": truth, "named": report["named_effect"],
+        "misspecified": report["misspecified"], "misspecified_by": report["misspecified_by"],
+        "gap_before": report["gap_before"], "null_scale": report["null_scale"],
+        "gap_ratio": cand.get("ratio"), "significant": cand.get("significant"),
+        "fitted": cand.get("best_params"), "detectable_from": (cand.get("detectable_from") or {}).get("drag_k"),
+        "limit_reason": (cand.get("limit") or {}).get("reason"), "closest": report.get("closest"),
+        "wall_s": time.perf_counter() - start,
+    }  # fmt: skip
+    row_file.write_text(json.dumps(row, indent=1))
+    return row
+
+
+def half_way(by_strength: dict[float, float]) -> float | None:
+    """The strength named half the time, linear between the measured strengths."""
+    points = sorted((s, f) for s, f in by_strength.items() if s > 0)
+    prev = (0.0, 0.0)
+    for s, f in points:
+        if f >= 0.5:
+            (s0, f0) = prev
+            return s0 + (0.5 - f0) * (s - s0) / (f - f0) if f > f0 else s
+        prev = (s, f)
+    return None
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--strengths", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.4, 0.8])
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--no-ridge-starts", action="store_true")
+    parser.add_argument("--out", type=Path, default=Path("/tmp/bench_diagnose_ridge"))
+    args = parser.parse_args()
+    sys.path.insert(0, str(ROOT / "tests" / "core"))
+    rows = []
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for drag in args.strengths:
+            row = run_case(args.out, seed, drag, args)
+            rows.append(row)
+            print(json.dumps({k: row[k] for k in ("seed", "drag", "named", "gap_ratio", "detectable_from")}),
+                  file=sys.stderr)  # fmt: skip
+    by_strength = {}
+    for drag in args.strengths:
+        group = [r for r in rows if r["drag"] == drag]
+        by_strength[drag] = sum(r["named"] == "ball_drag" for r in group) / len(group)
+    clean = [r for r in rows if r["drag"] == 0]
+    clean_limits = [r["detectable_from"] for r in clean]
+    finite = [v for v in clean_limits if v is not None]
+    summary = {
+        "cases": rows,
+        "by_strength": {f"{k:g}": v for k, v in by_strength.items()},
+        "clean_limits": clean_limits,
+        "median_clean_limit": statistics.median(finite) if finite else None,
+        "half_way": half_way(by_strength),
+        "false_discoveries": sum(bool(r["misspecified"] or r["named"]) for r in clean),
+        "ridge_starts": not args.no_ridge_starts,
+    }
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,136 @@
+"""When a model is misspecified and nothing is named: which candidate came closest, whether
+its search ended where it began (a trapped search), and what would settle it.
+
+A diagnosis that finds the model misspecified but names no effect leaves the user with
+two readings: the missing term is none of the registered effects, or one of them is but its
+search did not find it (an effect that trades off with a base parameter hides along a ridge:
+:mod:`physinfer.discrepancy.ridge`). The report's ``unnamed`` tells them apart as far as the
+diagnosis can: the closest candidate (the smallest gap ratio), the checks it failed, and
+whether its best θ is the baseline's fit with the effect off — its search then never left
+the baseline's basin, and the name is undecided rather than refused. What would settle it is
+said in options: more trials, holding a measured base parameter (the one the effect trades
+off with: the detection limit's ``mimicked_by`` or the largest ``reveal``, else the base
+parameter the effect's search moved most), a longer clip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from physinfer.parameters import ParameterSpace
+
+#: A search "ended at the baseline" when its best θ lies this close to θ̂ with the effect
+#: off, in normalised units (a fiftieth of each range).
+AT_START = 0.04
+
+_CHECK_WORDS = {
+    "beats_seed_noise": "its distances do not beat the baseline's by the rank test",
+    "beats_null_scale": "its improvement is within the null scale",
+    "pays_for_parameters": "its improvement does not pay for its parameters",
+}
+
+
+def search_end(space: ParameterSpace, best: Mapping[str, float], start: Mapping[str, float],
+               effect_names: Sequence[str]) -> dict[str, Any]:  # fmt: skip
+    """Where an effect's search ended against θ̂ with the effect off (both physical θ of ``space``).
+
+    Returns:
+        ``moved`` (the largest normalised change of any parameter), ``effect_moved`` (of the
+        effect's), ``at_baseline`` (``moved ≤ AT_START``), ``effect_off`` (``effect_moved ≤
+        AT_START``) and ``base_moves`` (base parameter → normalised change).
+    """
+    u_best = space.to_unit(space.complete(best))
+    u_start = space.to_unit(space.complete(start))
+    delta = {name: float(b - s) for name, b, s in zip(space.names, u_best, u_start, strict=True)}
+    moved = max((abs(v) for v in delta.values()), default=0.0)
+    effect_moved = max((abs(delta[n]) for n in effect_names if n in delta), default=0.0)
+    return {
+        "moved": moved,
+        "effect_moved": effect_moved,
+        "at_baseline": moved <= AT_START,
+        "effect_off": effect_moved <= AT_START,
+        "base_moves": {n: v for n, v in delta.items() if n not in effect_names},
+    }
+
+
+def closest_unnamed(
+    candidates: Sequence[Mapping[str, Any]],
+    ends: Mapping[str, Mapping[str, Any]],
+    *,
+    misspecified: bool,
+    named: str | None,
+    baseline_best: Mapping[str, float],
+    effect_steps: int,
+    clip_seconds: float | None = None,
+) -> dict[str, Any] | None:
+    """The report's ``unnamed``: ``None`` unless the model is misspecified and nothing named.
+
+    Args:
+        candidates: The refined candidates' records (``effect``, ``ratio``, ``checks``;
+            ``limit`` where the detection limits ran).
+        ends: Effect name → :func:`search_end`'s record of its search.
+        misspecified: The verdict.
+        named: The named effect.
+        baseline_best: The baseline's best fit (the values ``--fix`` would hold).
+        effect_steps: The effect searches' budget.
+        clip_seconds: The clip's length (``None``: not known; no longer clip is proposed).
+
+    Returns:
+        ``effect``, ``ratio``, ``failed`` (the checks it failed), ``ended_at_baseline``,
+        ``effect_off``, ``trades_off_with`` (base parameters), ``settle`` (options that would
+        settle it) and a one-line ``message``.
+    """
+    if not misspecified or named is not None or not candidates:
+        return None
+    best = min(candidates, key=lambda c: float(c.get("ratio", np.inf)))
+    name = str(best["effect"])
+    end = ends.get(name, {})
+    failed = [_CHECK_WORDS.get(k, k) for k, ok in (best.get("checks") or {}).items() if not ok]
+    partners = _partners(best.get("limit") or {}, end)
+    trapped = bool(end.get("at_baseline") or end.get("effect_off"))
+    settle = [f"more trials for the effects' searches (--effect-steps {2 * effect_steps})"]
+    settle += [f"--fix {p}=<its measured value> (the baseline fit says {baseline_best[p]:.4g})"
+               for p in partners[:1] if p in baseline_best]  # fmt: skip
+    if clip_seconds:
+        settle.append(f"a longer clip (--duration {2 * clip_seconds:.3g})")
+    where = (
+        "its search ended at the baseline's fit with the effect off (a trapped search: the name is undecided)"
+        if end.get("at_baseline")
+        else "its search ended with the effect off (a trapped search: the name is undecided)"
+        if end.get("effect_off")
+        else "its search left the baseline's fit"
+    )
+    trade = f"; {name} trades off with {' and '.join(partners)}" if partners else ""
+    why = f" ({'; '.join(failed)})" if failed else ""
+    message = (
+        f"nothing named, though the model is misspecified: the closest candidate, {name}, left "
+        f"x{float(best['ratio']):.2f} of the gap{why}; {where}{trade}. To settle it: " + "; ".join(settle)
+    )
+    return {
+        "effect": name,
+        "ratio": float(best["ratio"]),
+        "failed": failed,
+        "ended_at_baseline": bool(end.get("at_baseline")),
+        "effect_off": bool(end.get("effect_off")),
+        "trapped": trapped,
+        "trades_off_with": partners,
+        "settle": settle,
+        "message": message,
+    }
+
+
+def _partners(limit: Mapping[str, Any], end: Mapping[str, Any]) -> list[str]:
+    """The base parameters the effect trades off with: the limit's ``mimicked_by``, else the
+    parameter whose ``reveal`` lowers the limit most, else those its search moved most."""
+    mimics = limit.get("mimicked_by") or []
+    if mimics:
+        return [str(m) for m in mimics]
+    reveal = [r for r in limit.get("reveal") or [] if isinstance(r, Mapping) and r.get("kind") == "fix"]
+    if reveal:  # the largest factor; a limit reached only by fixing it (factor None) first
+        top = max(reveal, key=lambda r: np.inf if r.get("factor") is None else float(r["factor"]))
+        return [str(top["parameter"])]
+    moves = {k: abs(v) for k, v in (end.get("base_moves") or {}).items() if abs(v) > AT_START}
+    return sorted(moves, key=lambda k: -moves[k])[:1]
