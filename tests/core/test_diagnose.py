@@ -374,10 +374,18 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     out = tmp_path / "diag-quadratic_drag"
     for name in ("diagnosis.json", "model.json", "maps.png", "gaps.png"):
         assert (out / name).is_file()
-    # The augmented run's first trial is the warm start: the baseline's best with the drag off.
+    # The augmented run's first trial is its warm start: the closest to the target of the
+    # baseline's best with the drag off and the ridge's points (physinfer.discrepancy.ridge).
     first = json.loads((out / "effect-quadratic_drag" / "trials.jsonl").read_text().splitlines()[0])
-    assert first["params"]["drag_quadratic"] == 0.0
-    assert first["params"]["length"] == pytest.approx(report["baseline"]["best_params"]["length"])
+    start = json.loads((out / "effect-quadratic_drag" / "run.json").read_text())["start"]
+    assert first["params"] == pytest.approx(start)
+    ridge = json.loads((out / "ridge.json").read_text())["effects"]["quadratic_drag"]
+    closest = min([ridge["baseline_distance"], *(p["distance"] for p in ridge["starts"])])
+    if start["drag_quadratic"] == 0.0:
+        assert start["length"] == pytest.approx(report["baseline"]["best_params"]["length"])
+        assert ridge["baseline_distance"] == closest
+    else:
+        assert next(p["distance"] for p in ridge["starts"] if p["params"] == pytest.approx(start)) == closest
     again = _diagnose(tmp_path, target, steps=2, optimizer="random", calibrate_all=True)
     assert again["gap_before"] == report["gap_before"]
     model = read_model(out / "model.json")

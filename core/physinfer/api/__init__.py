@@ -295,6 +295,7 @@ def diagnose(
         limits=o.limits,
         limit_config=LimitConfig(reveal=o.reveal),
         screen=o.screen,
+        ridge_starts=o.ridge_starts,
         scene_set=dict(o.scene_set),
         conditioning=o.conditioning(),  # framing a wide video; ζ stays the default or --render-set
         workers=o.workers,

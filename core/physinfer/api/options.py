@@ -194,6 +194,9 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         reveal: Also measure whether another view or a longer clip would lower the limits.
         screen: Leave out, before refining them, the candidates whose signature no fit could
             name on this target (:mod:`physinfer.discrepancy.screen`); ``False``: refine all.
+        ridge_starts: Start each effect's search along the ridge it shares with the base
+            parameters, where the video points (:mod:`physinfer.discrepancy.ridge`);
+            ``False``: from the baseline's fit alone.
         workers: Local worker processes running the stages after the baseline side by side
             (``None``: one per CPU; 0 or 1: in this process).
         scheduler: A Dask scheduler address whose workers run those stages.
@@ -216,6 +219,7 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
     limits: bool = True
     reveal: bool = False
     screen: bool = True
+    ridge_starts: bool = True
     workers: int | None = None
     scheduler: str | None = None
 

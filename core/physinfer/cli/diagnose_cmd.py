@@ -137,6 +137,14 @@ def diagnose_cmd(
             "could name (a ladder of simulations; chaotic phenomena only). --no-screen refines every effect.",
         ),
     ] = True,
+    ridge_starts: Annotated[
+        bool,
+        typer.Option(
+            "--ridge-starts/--no-ridge-starts",
+            help="Start each effect's search also where the video points along the ridge it shares with the "
+            "base parameters (drag vs restitution), not only at the baseline's fit.",
+        ),
+    ] = True,
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,

@@ -50,8 +50,10 @@ if TYPE_CHECKING:
 Log = Callable[[str], None]
 
 RIDGE_FILE = "ridge.json"
-#: Strengths along the effect's path (fractions from off to the far end of its range).
-FRACTIONS = (0.25, 0.5, 1.0)
+#: Strengths along the effect's path (fractions from off to the far end of its range); a
+#: signed effect, probed both ways, has two each way.
+FRACTIONS = (0.125, 0.25, 0.5, 1.0)
+SIGNED_FRACTIONS = (0.5, 1.0)
 #: Lengths of the linear refit's step tried from each strength's rung (the embedding
 #: saturates: on the ball the linear step went a third of the way to the ridge).
 MULTIPLIERS = (1.0, 2.0, 4.0)
@@ -145,7 +147,8 @@ def ridge_starts(
         render_params: The target's ζ.
         theta: θ̂, the baseline's best fit.
         target_embedding: The target's embedding.
-        floor: The noise floor at θ̂ (0: deterministic, one seed a point; else two).
+        floor: The noise floor at θ̂ (recorded; every point is one clip under one seed,
+            deterministic or not: a start needs no error bar, the search measures it again).
         effect_objs: The effects to probe.
         say: Progress lines.
         pool: The diagnosis' workers (each clip a job when it has two or more).
@@ -158,9 +161,9 @@ def ridge_starts(
         return {}
     space = base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(theta).items()}
-    seeds = probe_seeds(settings.seed, 1 if floor <= 0 else 2)
+    seeds = probe_seeds(settings.seed, 1)
     key = {"theta": theta, "effects": sorted(effect_objs), "seeds": seeds, "fractions": list(FRACTIONS),
-           "multipliers": list(MULTIPLIERS), "polish": POLISH}  # fmt: skip
+           "signed_fractions": list(SIGNED_FRACTIONS), "multipliers": list(MULTIPLIERS), "polish": POLISH}  # fmt: skip
     path = settings.out / RIDGE_FILE
     if path.is_file():
         stored = json.loads(path.read_text())
@@ -180,9 +183,10 @@ def ridge_starts(
     for name, effect in effect_objs.items():
         model = augmented_pipeline(base, [effect], settings.duration_s, fixed)
         points: list[dict[str, Any]] = []
-        for moved, held in effect_paths(effect.parameter_space):
+        paths = effect_paths(effect.parameter_space)
+        for moved, held in paths:
             state = RefitState(jac.copy(), u0.copy(), emb0)
-            for fraction in FRACTIONS:
+            for fraction in FRACTIONS if len(paths) == 1 else SIGNED_FRACTIONS:
                 values = values_at(effect.parameter_space, moved, held, fraction)
                 visited = _refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
                 u, d = min(visited, key=lambda v: v[1])
@@ -194,7 +198,7 @@ def ridge_starts(
         if best is not None:
             shown = ", ".join(f"{k} {v:.3g}" for k, v in best["params"].items())
             say(f"      {name}: closest ridge point {shown} (distance {best['distance']:.4g}; θ̂ {d0:.4g})")
-    atomic_write_json(path, {"key": key, "effects": result, "simulations": probe.simulations})
+    atomic_write_json(path, {"key": key, "effects": result, "simulations": probe.simulations, "floor": floor})
     return json.loads(path.read_text())["effects"]
 
 
