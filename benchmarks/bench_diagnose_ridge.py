@@ -6,7 +6,10 @@ bounce as a lower restitution does. For each seed a base θ is drawn (restitutio
 height 1.2–1.8 m) and a target is made at each ``--strengths`` value of ``drag_k`` (0: the
 clean target), written to MP4 (64 px), and diagnosed with the phenomenon's defaults
 (``--seed`` = the case's seed, one worker unless ``--workers``). ``--no-ridge-starts``
-diagnoses as before the ridge starts (each effect's search from the baseline fit alone).
+diagnoses as before the ridge starts (each effect's search from the baseline fit alone);
+``--check-limits`` checks each not-named limit with the diagnosis' own stages
+(:mod:`physinfer.discrepancy.limit_check`) — run over a finished ``--out``, the diagnoses
+resume and only the checks run.
 
 Prints one JSON object: ``cases`` (one row each: truth, named, misspecified, the drag
 model's gap ratio and fitted drag, the stated limit ``detectable_from``, wall time),
@@ -47,18 +50,22 @@ def run_case(out: Path, seed: int, drag: float, args: argparse.Namespace) -> dic
     """Diagnose one target (or read its row back)."""
     from bouncing_ball_plugin import ball_registry, ball_target
 
+    from physinfer.discrepancy.limits import LimitConfig
     from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
 
     case = out / f"seed{seed}-drag{drag:g}"
-    row_file = case / "case.json"
+    row_file = case / ("case-checked.json" if args.check_limits else "case.json")
     if row_file.is_file():
         return json.loads(row_file.read_text())
     case.mkdir(parents=True, exist_ok=True)
     truth = truth_of(seed, drag)
-    target = ball_target(truth, case / "target.mp4")
+    target = case / "target.mp4"
+    if not target.is_file():  # a re-run with --check-limits resumes the diagnosis on the same file
+        ball_target(truth, target)
     settings = DiagnoseSettings(
         plugin="bouncing_ball", out=case / "diagnosis", target_path=Path(target), seed=seed, workers=args.workers,
         videos=False, ridge_starts=not args.no_ridge_starts, registry_factory=ball_registry,
+        limit_config=LimitConfig(search_check=args.check_limits),
     )  # fmt: skip
     start = time.perf_counter()
     report = run_diagnosis(ball_registry(), settings)
@@ -69,7 +76,8 @@ def run_case(out: Path, seed: int, drag: float, args: argparse.Namespace) -> dic
         "gap_before": report["gap_before"], "null_scale": report["null_scale"],
         "gap_ratio": cand.get("ratio"), "significant": cand.get("significant"),
         "fitted": cand.get("best_params"), "detectable_from": (cand.get("detectable_from") or {}).get("drag_k"),
-        "limit_reason": (cand.get("limit") or {}).get("reason"), "closest": report.get("closest"),
+        "limit_reason": (cand.get("limit") or {}).get("reason"), "unnamed": report.get("unnamed"),
+        "local_limit": ((cand.get("limit") or {}).get("local_detectable_from") or {}).get("drag_k"),
         "wall_s": time.perf_counter() - start,
     }  # fmt: skip
     row_file.write_text(json.dumps(row, indent=1))
@@ -95,6 +103,8 @@ def main() -> int:
     parser.add_argument("--strengths", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.4, 0.8])
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--no-ridge-starts", action="store_true")
+    parser.add_argument("--check-limits", action="store_true",
+                        help="diagnose --check-limits (rows in case-checked.json; a case diagnosed without it resumes)")
     parser.add_argument("--out", type=Path, default=Path("/tmp/bench_diagnose_ridge"))
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT / "tests" / "core"))

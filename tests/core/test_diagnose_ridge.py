@@ -17,7 +17,8 @@ sys.path.insert(0, str(Path(__file__).parent))  # the test plugin beside this fi
 
 from bouncing_ball_plugin import AirDrag, ball_registry, ball_target  # noqa: E402
 
-from physinfer.discrepancy.ridge import effect_paths, search_starts
+from physinfer.discrepancy.ridge import effect_paths
+from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.unnamed import closest_unnamed, search_end
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
 from physinfer.optimizers.random import RandomOptimizer
@@ -152,3 +153,21 @@ def test_a_drag_behind_the_restitution_is_named_with_ridge_starts_and_trapped_wi
     assert abs(drag - 0.8) < 0.3, after["candidates"][0]
     run = json.loads((tmp_path / "after" / "effect-ball_drag" / "run.json").read_text())
     assert run["start"]["drag_k"] > 0 and run["extra_starts"], run
+
+
+def test_a_checked_limit_replaces_the_local_one_and_says_so():
+    from physinfer.discrepancy.limit_check import apply_checks
+    from physinfer.discrepancy.limit_text import limit_line
+
+    cand = {"effect": "ball_drag", "detectable_from": {"drag_k": 0.13}, "limit": {"reason": None, "reveal": []}}
+    check = {"checks": [{"named": False}, {"named": True}], "detectable_from": {"drag_k": 0.26}, "fraction": 0.17,
+             "local": {"drag_k": 0.13}, "reason": None}  # fmt: skip
+    apply_checks([cand], {"ball_drag": check})
+    assert cand["detectable_from"] == {"drag_k": 0.26} and cand["limit"]["local_detectable_from"] == {"drag_k": 0.13}
+    line = limit_line(cand, None, 4.0)
+    assert "could reveal drag_k ≥ 0.26" in line and "the local refit said drag_k ≥ 0.13" in line, line
+    # Not named at either strength: no limit, and the reason says the search does not reach it.
+    cand = {"effect": "ball_drag", "detectable_from": {"drag_k": 0.13}, "limit": {"reason": None, "reveal": []}}
+    missed = {**check, "detectable_from": None, "fraction": None, "reason": "reachable only from a start ..."}
+    apply_checks([cand], {"ball_drag": missed})
+    assert cand["detectable_from"] is None and "reachable only" in limit_line(cand, None, 4.0)

@@ -293,7 +293,7 @@ def diagnose(
         ),
         videos=not o.no_video,
         limits=o.limits,
-        limit_config=LimitConfig(reveal=o.reveal),
+        limit_config=LimitConfig(reveal=o.reveal, search_check=o.check_limits),
         screen=o.screen,
         ridge_starts=o.ridge_starts,
         scene_set=dict(o.scene_set),

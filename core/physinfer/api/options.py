@@ -192,11 +192,10 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         no_video: Skip the side-by-side video.
         limits: Estimate each effect's detection limit from a ladder of simulations.
         reveal: Also measure whether another view or a longer clip would lower the limits.
+        check_limits: Check each not-named limit with this search (:mod:`~physinfer.discrepancy.limit_check`).
         screen: Leave out, before refining them, the candidates whose signature no fit could
             name on this target (:mod:`physinfer.discrepancy.screen`); ``False``: refine all.
-        ridge_starts: Start each effect's search along the ridge it shares with the base
-            parameters, where the video points (:mod:`physinfer.discrepancy.ridge`);
-            ``False``: from the baseline's fit alone.
+        ridge_starts: Start each effect's search along its ridge too (:mod:`~physinfer.discrepancy.ridge`).
         workers: Local worker processes running the stages after the baseline side by side
             (``None``: one per CPU; 0 or 1: in this process).
         scheduler: A Dask scheduler address whose workers run those stages.
@@ -218,6 +217,7 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
     no_video: bool = False
     limits: bool = True
     reveal: bool = False
+    check_limits: bool = False
     screen: bool = True
     ridge_starts: bool = True
     workers: int | None = None

@@ -129,6 +129,14 @@ def diagnose_cmd(
             "(chaotic phenomena; re-renders and re-simulates the ladder).",
         ),
     ] = False,
+    check_limits: Annotated[
+        bool,
+        typer.Option(
+            "--check-limits",
+            help="Check each effect not named: run this diagnosis' own stages on a target made with it at its "
+            "stated limit (doubled once if not named there), so the limit is what this search names. Costly.",
+        ),
+    ] = False,
     screen: Annotated[
         bool,
         typer.Option(

@@ -38,6 +38,10 @@ def limit_line(candidate: Mapping[str, Any], named: str | None, clip_seconds: fl
     status = "named" if candidate["effect"] == named else "not named"
     clip = "this clip" if clip_seconds is None else f"this {clip_seconds:.3g}-s clip"
     line = f"{candidate['effect']}: {status}; {clip} {summary_phrase(limit)}{reveal_phrase(limit)}"
+    if (check := limit.get("search_check")) is not None:  # diagnose --check-limits
+        local = ", ".join(f"{k} ≥ {v:.3g}" for k, v in (limit.get("local_detectable_from") or {}).items())
+        tried = len(check.get("checks") or [])
+        line += f" (checked: this diagnosis' stages on {tried} made target(s); the local refit said {local or 'none'})"
     low = limit.get("at_lower_scale")
     if low and low["detectable_from"] != limit["detectable_from"]:  # the null scale is a range
         line += f" [at the null scale's lower end: {summary_phrase(low).removeprefix('could reveal ')}]"

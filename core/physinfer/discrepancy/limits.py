@@ -99,6 +99,9 @@ class LimitConfig:
         reveal: Also measure another view and a longer clip (chaotic phenomena; costly).
         budget_share: Most of the diagnosis's simulations the ladder may cost; fewer seeds
             per rung (at least two) are used to stay within it.
+        search_check: Check each not-named candidate's limit with the diagnosis' own
+            stages on a target made there (:mod:`physinfer.discrepancy.limit_check`; costly).
+            Not part of the ladder's cache key: the check is kept apart.
     """
 
     fractions: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
@@ -106,6 +109,7 @@ class LimitConfig:
     step: float = 0.4
     reveal: bool = False
     budget_share: float = 0.2
+    search_check: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (part of the cache key)."""

@@ -30,13 +30,13 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from physinfer.discrepancy.ladder import Probe, strength_path, values_at
 from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
+from physinfer.discrepancy.starts import RIDGE_FILE
 from physinfer.io import atomic_write_json
 from physinfer.loop import squared_distance
 from physinfer.noise import noise_seeds
@@ -49,7 +49,6 @@ if TYPE_CHECKING:
 
 Log = Callable[[str], None]
 
-RIDGE_FILE = "ridge.json"
 #: Strengths along the effect's path (fractions from off to the far end of its range); a
 #: signed effect, probed both ways, has two each way.
 FRACTIONS = (0.125, 0.25, 0.5, 1.0)
@@ -61,8 +60,6 @@ MULTIPLIERS = (1.0, 2.0, 4.0)
 POLISH = 2
 #: Jacobian step in normalised units (the detection ladder's).
 JACOBIAN_STEP = 0.4
-#: Starts handed to a search besides its first trial, at most.
-MAX_EXTRA = 4
 
 
 def effect_paths(space: ParameterSpace) -> list[tuple[dict[str, tuple[float, float]], dict[str, float]]]:
@@ -200,29 +197,3 @@ def ridge_starts(
             say(f"      {name}: closest ridge point {shown} (distance {best['distance']:.4g}; θ̂ {d0:.4g})")
     atomic_write_json(path, {"key": key, "effects": result, "simulations": probe.simulations, "floor": floor})
     return json.loads(path.read_text())["effects"]
-
-
-def search_starts(
-    out: Path, name: str, baseline_best: Mapping[str, float], off_start: Mapping[str, float], steps: int
-) -> tuple[dict[str, float], list[dict[str, float]]] | None:
-    """The warm start and the extra first trials of effect ``name``'s search from ``ridge.json``
-    (``None`` when there is none for this θ̂: the search starts at ``off_start`` alone).
-
-    The search starts at the closest of θ̂ with the effect off and the ridge points; the
-    others follow as its first trials (at most :data:`MAX_EXTRA`, and a quarter of the
-    budget), the closest first, θ̂ among them when a ridge point led."""
-    path = out / RIDGE_FILE
-    if not path.is_file():
-        return None
-    stored = json.loads(path.read_text())
-    theta = stored.get("key", {}).get("theta", {})
-    if not theta or any(abs(float(baseline_best.get(k, np.nan)) - v) > 1e-12 for k, v in theta.items()):
-        return None
-    record = stored.get("effects", {}).get(name)
-    if not record:
-        return None
-    candidates = [(float(p["distance"]), dict(p["params"])) for p in record["starts"]]
-    candidates.append((float(record["baseline_distance"]), dict(off_start)))
-    candidates.sort(key=lambda c: c[0])  # stable: a ridge point equal to θ̂ stays first
-    n_extra = min(MAX_EXTRA, max(0, steps // 4), len(candidates) - 1)
-    return candidates[0][1], [p for _, p in candidates[1 : 1 + n_extra]]

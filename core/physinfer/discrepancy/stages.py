@@ -19,7 +19,7 @@ import numpy as np
 
 from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
 from physinfer.discrepancy.gap import measure_gap
-from physinfer.discrepancy.ridge import search_starts
+from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement

@@ -56,6 +56,17 @@ def search_end(space: ParameterSpace, best: Mapping[str, float], start: Mapping[
     }
 
 
+def stage_end(stage: Any, baseline_best: Mapping[str, float]) -> dict[str, Any]:
+    """:func:`search_end` of an effect's stage (:class:`physinfer.discrepancy.stages.Stage`)
+    against the baseline's fit with its effect off."""
+    from physinfer.discrepancy.candidates import warm_start
+
+    effects = list(stage.pipeline.effects)
+    names = [n for effect in effects for n in effect.parameter_space.names]
+    start = warm_start(baseline_best, effects)
+    return search_end(stage.pipeline.simulator.parameter_space, stage.result.best_params, start, names)
+
+
 def closest_unnamed(
     candidates: Sequence[Mapping[str, Any]],
     ends: Mapping[str, Mapping[str, Any]],

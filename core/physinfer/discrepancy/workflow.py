@@ -48,17 +48,9 @@ from physinfer.discrepancy.calibration_stage import (
     limit_scale,
     scale_text,
 )
-from physinfer.discrepancy.candidates import warm_start
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
-from physinfer.discrepancy.decide import (
-    DecisionRule,
-    effect_significance,
-    final_verdict,
-    misspecification,
-    name_effect,
-    remainder_after_naming,
-    self_consistency_gap,
-)
+from physinfer.discrepancy.decide import DecisionRule, remainder_after_naming, self_consistency_gap
+from physinfer.discrepancy.judge import judge_stages
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.limits import LimitConfig
 from physinfer.discrepancy.localise import LocaliseConfig
@@ -76,7 +68,7 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
     effect_stage,
     run_stage,
 )
-from physinfer.discrepancy.unnamed import closest_unnamed, search_end
+from physinfer.discrepancy.unnamed import closest_unnamed, stage_end
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
@@ -411,7 +403,7 @@ def _diagnose_stages(
     tested = float(before.gap.gap) if settings.calibrate and settings.calibration_control else float(gap0.gap)
 
     def judged(scale: float) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
-        return _judge(stages, before, tested, scale, settings.rule, effect_objs)
+        return judge_stages(stages, before, tested, scale, settings.rule, effect_objs)
 
     # 4. The self-consistency runs (the null scale's optimizer part), as many as decide.
     calibration, scale, scale_range = calibrate(
@@ -448,8 +440,15 @@ def _diagnose_stages(
             lim = limits["effects"][cand["effect"]]
             cand["detectable_from"] = lim["detectable_from"]
             cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+        if settings.limit_config.search_check:
+            from physinfer.discrepancy.limit_check import apply_checks, check_limits
+
+            with clock.stage("limit_check"):
+                apply_checks(candidates, check_limits(
+                    registry, settings, base, target, before.best_params, limits["effects"], refined, named,
+                    limits_at, len(effect_objs), steps, effect_steps, tuple(seeds), say))  # fmt: skip
     unnamed = closest_unnamed(
-        candidates, {s.label: _search_end(s, baseline.best_params) for s in stages[1:]},
+        candidates, {s.label: stage_end(s, baseline.best_params) for s in stages[1:]},
         misspecified=bool(verdict["misspecified"]), named=named, baseline_best=before.best_params,
         effect_steps=effect_steps, clip_seconds=None if limits is None else limits.get("clip_seconds"),
     )  # fmt: skip
@@ -477,52 +476,3 @@ def _diagnose_stages(
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
-
-
-def _search_end(stage: Stage, baseline_best: Mapping[str, float]) -> dict[str, Any]:
-    """Where an effect's search ended against the baseline's fit with the effect off."""
-    effects = stage.pipeline.effects
-    names = [n for effect in effects for n in effect.parameter_space.names]
-    start = warm_start(baseline_best, list(effects))
-    return search_end(stage.pipeline.simulator.parameter_space, stage.result.best_params, start, names)
-
-
-def _judge(
-    stages: list[Stage],
-    before: Stage,
-    tested: float,
-    scale: float,
-    rule: DecisionRule,
-    effect_objs: Mapping[str, Any],
-) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
-    """Every decision at null scale ``scale``: the candidates' records, the verdict, the named effect."""
-    gap_before = float(before.gap.gap)
-    candidates = []
-    for stage in stages[1:]:
-        decision = effect_significance(
-            distances=stage.gap.to_target or [],
-            baseline_distances=before.gap.to_target or [],
-            gap=float(stage.gap.gap),
-            gap_before=gap_before,
-            n_params=stage.n_params,
-            scale=scale,
-            rule=rule,
-        )
-        candidates.append(
-            {
-                "effect": stage.label,
-                "description": effect_objs[stage.label].description,
-                "gap": float(stage.gap.gap),
-                "n_params": stage.n_params,
-                **decision,
-                "best_params": stage.result.best_params,
-                "effect_params": {k: stage.result.best_params[k] for k in effect_objs[stage.label].parameter_space.names},
-                "at_bounds": stage.result.extra.get("at_bounds", {}),
-                "distances": list(stage.gap.to_target or []),
-                "floor": stage.gap.floor,
-                "run_dir": stage.result.run_dir,
-            }
-        )
-    # Candidates screened out count in the effect test's divisor: the others' levels do not change.
-    verdict = final_verdict(misspecification(tested, scale, rule), candidates, rule, n_candidates=len(effect_objs))
-    return candidates, verdict, name_effect(candidates, verdict["misspecified"])
