@@ -144,8 +144,16 @@ def test_limits_at_the_upper_end_of_a_range_say_so_in_the_verdict_and_on_the_pag
 # ------------------------------------------------------------------ the workflow on the pendulum
 
 
-def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(tmp_path: Path):
+def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(tmp_path: Path, monkeypatch):
     from tests.core.test_diagnose import _diagnose, _pendulum_target
+
+    # Each diagnosis encodes its self-consistency targets once; libx264 does not repeat itself
+    # here (write_video's docstring), and two encodings of one clip moved the null scale by 6 %
+    # (0.0849 against 0.0800) in 2 of 5 runs. Compared here is the logic, not the encoder.
+    import physinfer.video
+
+    lossy = physinfer.video.write_video
+    monkeypatch.setattr(physinfer.video, "write_video", lambda path, frames, fps=None, **kw: lossy(path, frames, fps, lossless=True))
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
     kw = {"steps": 3, "optimizer": "random", "limits": True, "workers": 1}
