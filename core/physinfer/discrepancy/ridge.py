@@ -56,6 +56,11 @@ SIGNED_FRACTIONS = (0.5, 1.0)
 #: Lengths of the linear refit's step tried from each strength's rung (the embedding
 #: saturates: on the ball the linear step went a third of the way to the ridge).
 MULTIPLIERS = (1.0, 2.0, 4.0)
+#: Rounds that halve the bracket of strengths around the closest point found (a weak
+#: effect's ridge point lies between θ̂ and the first rung: on the ball a drag of 0.1 1/m
+#: against rungs from 0.19), for a deterministic phenomenon only: a chaotic one's single
+#: clips are too noisy to tell neighbouring strengths apart, and its clips cost more.
+REFINE_ROUNDS = 2
 #: Gauss–Newton steps after the line search, per strength.
 POLISH = 2
 #: Jacobian step in normalised units (the detection ladder's).
@@ -123,6 +128,47 @@ def _refit_to_target(
     return [(u, d) for u, _, d in visited]
 
 
+def _probe_path(
+    probe: Probe,
+    model: Pipeline,
+    space: ParameterSpace,
+    effect_space: ParameterSpace,
+    path: tuple[dict[str, tuple[float, float]], dict[str, float]],
+    fractions: Sequence[float],
+    rounds: int,
+    goal: np.ndarray,
+    state: RefitState,
+    start: tuple[np.ndarray, float],
+    seeds: Sequence[int],
+    keep: np.ndarray,
+) -> list[dict[str, Any]]:
+    """The refit at each of ``fractions`` along one path, then ``rounds`` halvings of the
+    bracket around the closest point; every point's record (θ, distance, strength, direction)."""
+    moved, held = path
+    u0, d0 = start
+    found = {0.0: (u0, d0)}  # fraction → the refit's best (normalised base θ, distance)
+    points: list[dict[str, Any]] = []
+
+    def at(fraction: float) -> None:
+        values = values_at(effect_space, moved, held, fraction)
+        visited = _refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
+        u, d = min(visited, key=lambda v: v[1])
+        found[fraction] = (u, d)
+        points.append({"params": {**space.from_unit(u), **values}, "distance": d, "fraction": fraction,
+                       "direction": {n: on for n, (_, on) in moved.items()}})  # fmt: skip
+
+    for fraction in fractions:
+        at(fraction)
+    for _ in range(rounds):
+        known = sorted(found)
+        i = min(range(len(known)), key=lambda j: found[known[j]][1])
+        for j in (i - 1, i + 1):
+            if 0 <= j < len(known):
+                state.u = found[known[i]][0]  # continue from the closest point's refit
+                at(0.5 * (known[i] + known[j]))
+    return points
+
+
 def ridge_starts(
     settings: DiagnoseSettings,
     base: Pipeline,
@@ -144,8 +190,9 @@ def ridge_starts(
         render_params: The target's ζ.
         theta: θ̂, the baseline's best fit.
         target_embedding: The target's embedding.
-        floor: The noise floor at θ̂ (recorded; every point is one clip under one seed,
-            deterministic or not: a start needs no error bar, the search measures it again).
+        floor: The noise floor at θ̂ (every point is one clip under one seed, deterministic
+            or not: a start needs no error bar, the search measures it again; where it is 0
+            the strengths are refined around the closest point, :data:`REFINE_ROUNDS`).
         effect_objs: The effects to probe.
         say: Progress lines.
         pool: The diagnosis' workers (each clip a job when it has two or more).
@@ -159,8 +206,10 @@ def ridge_starts(
     space = base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(theta).items()}
     seeds = probe_seeds(settings.seed, 1)
+    rounds = REFINE_ROUNDS if floor <= 0 else 0
     key = {"theta": theta, "effects": sorted(effect_objs), "seeds": seeds, "fractions": list(FRACTIONS),
-           "signed_fractions": list(SIGNED_FRACTIONS), "multipliers": list(MULTIPLIERS), "polish": POLISH}  # fmt: skip
+           "signed_fractions": list(SIGNED_FRACTIONS), "multipliers": list(MULTIPLIERS), "polish": POLISH,
+           "rounds": rounds}  # fmt: skip
     path = settings.out / RIDGE_FILE
     if path.is_file():
         stored = json.loads(path.read_text())
@@ -182,13 +231,9 @@ def ridge_starts(
         points: list[dict[str, Any]] = []
         paths = effect_paths(effect.parameter_space)
         for moved, held in paths:
-            state = RefitState(jac.copy(), u0.copy(), emb0)
-            for fraction in FRACTIONS if len(paths) == 1 else SIGNED_FRACTIONS:
-                values = values_at(effect.parameter_space, moved, held, fraction)
-                visited = _refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
-                u, d = min(visited, key=lambda v: v[1])
-                points.append({"params": {**space.from_unit(u), **values}, "distance": d, "fraction": fraction,
-                               "direction": {n: on for n, (_, on) in moved.items()}})  # fmt: skip
+            fractions = FRACTIONS if len(paths) == 1 else SIGNED_FRACTIONS
+            points += _probe_path(probe, model, space, effect.parameter_space, (moved, held), fractions, rounds,
+                                  goal, RefitState(jac.copy(), u0.copy(), emb0), (u0, d0), seeds, keep)  # fmt: skip
         points.sort(key=lambda p: p["distance"])
         result[name] = {"starts": points, "baseline_distance": d0}
         best = points[0] if points else None
