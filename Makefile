@@ -89,7 +89,7 @@ docs: install
 # The flag's shipped SDN weights: generate the cpu FlagSim preset (resumes), train (resumes;
 # 15 epochs on 60-frame inputs, well under an hour on 2 cores), export float16 weights.
 pretrained: install
-	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --seed 0 --out runs/flagsim-cpu
+	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --seed 0 --gray --out runs/flagsim-cpu
 	$(BIN)/physinfer train --plugin flag --data runs/flagsim-cpu --out runs/sdn-cpu --epochs 15 --frames 60
 	$(BIN)/python -c "from physinfer_flag.sdn.weights import export_weights; \
 		print(export_weights('runs/sdn-cpu', info={'made_by': 'make pretrained'}))"
@@ -100,7 +100,7 @@ pretrained: install
 # check on the held-out split.
 posterior: install
 	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
-		--frames 60 --size 224 --seed 21 --out runs/flag-posterior
+		--frames 60 --size 224 --gray --seed 21 --out runs/flag-posterior
 	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior --device cpu --seed 0 \
 		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
 		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors --overwrite
@@ -112,7 +112,7 @@ posterior: install
 # the same embedder and flows as `posterior`, with the size as an input; then its calibration.
 posterior-sizes: install
 	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
-		--frames 60 --size 224 --seed 22 --scene-range flag_length=0.9:3 --scene-range flag_height=0.6:2 \
+		--frames 60 --size 224 --gray --seed 22 --scene-range flag_length=0.9:3 --scene-range flag_height=0.6:2 \
 		--out runs/flag-posterior-sizes
 	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior-sizes --device cpu --seed 0 \
 		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \

@@ -41,7 +41,7 @@ def generate(args: argparse.Namespace, data: Path) -> float:
     """``physinfer dataset generate`` (resumes); returns its wall time."""
     start = time.perf_counter()
     cmd = [str(BIN), "dataset", "generate", "--plugin", args.plugin, "--sims", args.sims, "--renders-per-sim", "1",
-           "--frames", str(args.frames), "--size", str(args.size), "--seed", str(args.seed), "--out", str(data)]
+           "--frames", str(args.frames), "--size", str(args.size), "--gray", "--seed", str(args.seed), "--out", str(data)]
     subprocess.run(cmd, check=True)
     return time.perf_counter() - start
 

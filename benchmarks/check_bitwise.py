@@ -141,7 +141,7 @@ def dataset() -> dict[str, Any]:
         root = Path(tmp) / "flagsim"
         cli = Path(sys.executable).parent / "physinfer"
         args = [str(cli), "dataset", "generate", "--plugin", "flag", "--out", str(root), "--sims", "2,1,1",
-                "--renders-per-sim", "2", "--frames", "8", "--size", "48", "--sims-per-unit", "2",
+                "--renders-per-sim", "2", "--frames", "8", "--size", "48", "--gray", "--sims-per-unit", "2",
                 "--workers", "0", "--seed", "5", "--json"]
         proc = subprocess.run(args, capture_output=True, text=True, check=False)
         if proc.returncode != 0:

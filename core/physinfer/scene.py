@@ -309,3 +309,19 @@ class SceneRegistry:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._registry, name)
+
+
+def scene_remedy(phenomenon: Any, scene: Mapping[str, Any] | None) -> str:
+    """The way forward for a scene no estimator covers: the commands that make one, and
+    ``refine``, which measures without one."""
+    name = getattr(phenomenon, "name", "PLUGIN")
+    sets = " ".join(
+        f"--scene-set {k}={v:g}" if isinstance(v, (int, float)) else f"--scene-set {k}={v}"
+        for k, v in sorted((scene or {}).items())
+    )
+    return (
+        f"for an interval, train one on clips of this scene: `physinfer dataset generate --plugin {name} "
+        f"{sets} --sims 800,0,200 --renders-per-sim 1 --out DATA`, then `physinfer posterior train --plugin "
+        f"{name} --data DATA --out mine.safetensors` and pass --posterior mine.safetensors; or measure it "
+        f"with `physinfer refine --plugin {name} {sets}`, which searches without a posterior"
+    )

@@ -421,7 +421,7 @@ def test_cli_generate_prints_one_json_object(wave_registry, tmp_path):
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
     assert summary["renders"] == {"train": 6, "val": 2, "test": 2} and summary["renders_per_minute"] > 0
-    assert summary["clip"]["n_frames"] == 8 and ClipDataset(tmp_path / "d", "test")[0].shape == (8, 16, 20)
+    assert summary["clip"]["n_frames"] == 8 and ClipDataset(tmp_path / "d", "test")[0].shape == (8, 16, 20, 3)
 
     again = runner.invoke(dataset_app, args)
     assert json.loads(again.stdout)["units"]["skipped"] == summary["units"]["total"]

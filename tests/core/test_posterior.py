@@ -393,7 +393,7 @@ def test_the_api_trains_and_calibrates_with_progress_and_figures(
         max_epochs=10, device="cpu", progress=lambda *args: seen.append(args),
     )  # fmt: skip
     assert trained.path.is_file() and trained.to_dict()["parameters"] == ["length", "damping", "amplitude"]
-    assert {stage for stage, _, _ in seen} == {"embedding", "training"}
+    assert {stage for stage, _, _ in seen} == {"embedding", "training", "held-out clips"}
     curve = trained.estimator.validation_curves[0]
     assert len(curve) == trained.to_dict()["training"]["epochs"]
     assert isinstance(trained.plot(), Figure)
@@ -405,7 +405,7 @@ def test_the_api_trains_and_calibrates_with_progress_and_figures(
         out=tmp_path / "cal", progress=lambda *args: seen.append(args),
     )  # fmt: skip
     assert cal.to_dict()["n_pairs"] == 20 and (tmp_path / "cal" / "calibration.json").is_file()
-    assert {stage for stage, _, _ in seen} == {"embedding", "sampling"}
+    assert {stage for stage, _, _ in seen} == {"embedding as given", "embedding as stored", "sampling"}
     assert len(cal.plot().axes) == 4  # three rank histograms and the coverage panel
     with pytest.raises(UserInputError, match="data: give"):
         pi.evaluate_calibration("pendulum_lab", posterior=path)

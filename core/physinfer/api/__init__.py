@@ -399,7 +399,8 @@ def train_posterior(
         return run(
             registry(), plugin=plugin, data=data, out=out, embedder=o.embedder,
             embedder_frames=o.embedder_frames, weights=_optional(o.weights), device=o.device,
-            split=o.split, network=network, seed=o.seed, progress=report,
+            split=o.split, network=network, seed=o.seed, as_given=not o.stored,
+            accept_miscalibrated=o.accept_miscalibrated, progress=report,
         )  # fmt: skip
 
 

@@ -271,6 +271,10 @@ class PosteriorTrainOptions:
         ensemble: Flows trained with seeds ``seed .. seed + ensemble - 1``; the posterior is
             their mixture.
         device: torch device (``None``: CUDA when present, else CPU).
+        stored: Train on the stored renders as they are, instead of the clips as users
+            give videos (camera effects, H.264 and ``infer``'s conditioning; the default).
+        accept_miscalibrated: Write an estimator that fails its held-out check (its
+            intervals miss the truth too often or collapse), with the check recorded.
     """
 
     data: Path | None = None
@@ -286,6 +290,8 @@ class PosteriorTrainOptions:
     seed: int = 0
     ensemble: int = 1
     device: str | None = None
+    stored: bool = False
+    accept_miscalibrated: bool = False
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,14 @@ def generate_cmd(
     ] = None,
     frames: Annotated[int | None, typer.Option("--frames", help="Frames per stored clip.")] = None,
     size: Annotated[str | None, typer.Option("--size", help="Stored clip size: N or HxW pixels.")] = None,
-    rgb: Annotated[bool, typer.Option("--rgb", help="Store RGB clips instead of grayscale.")] = False,
+    rgb: Annotated[
+        bool,
+        typer.Option(
+            "--rgb/--gray",
+            help="Store RGB clips (the default: videos arrive in colour) or grayscale (a third of the disk; "
+            "for the SDN's contrastive training, which reads grayscale).",
+        ),
+    ] = True,
     sims_per_unit: Annotated[
         int | None, typer.Option("--sims-per-unit", help="Simulations batched per work unit (one shard).")
     ] = None,
@@ -155,7 +162,7 @@ def _generate(
         sims_per_unit=sims_per_unit,
         n_frames=frames,
         size=_parse_size(size) if size is not None else None,
-        channels=3 if rgb else None,
+        channels=3 if rgb else 1,
         seeds_per_theta=seeds_per_theta,
     )
     sharing = f", {chosen.seeds_per_theta} seeds per θ" if chosen.seeds_per_theta > 1 else ""

@@ -96,9 +96,26 @@ def train_cmd(
         ),
     ] = 1,
     device: DeviceOpt = None,
+    stored: Annotated[
+        bool,
+        typer.Option(
+            "--stored",
+            help="Train on the stored renders as they are (default: on the clips as users give videos: "
+            "camera effects, H.264 and infer's conditioning).",
+        ),
+    ] = False,
+    accept_miscalibrated: Annotated[
+        bool,
+        typer.Option(
+            "--accept-miscalibrated",
+            help="Write the estimator even when it fails its check on the held-out clips.",
+        ),
+    ] = False,
     as_json: JsonOpt = False,
 ) -> None:
-    """Train q(θ | s(x)) on a dataset's (θ, embedding) pairs; embeddings are cached beside the dataset."""
+    """Train q(θ | s(x)) on a dataset's (θ, embedding) pairs, the clips sent down the path a user's
+    video takes, and check it on the held-out clips before writing; embeddings are cached beside
+    the dataset."""
     given = dict(locals())
     from physinfer import api
     from physinfer.cli.options import options_from_cli
@@ -119,6 +136,30 @@ def train_cmd(
     err_console.print(
         f"trained on {t['pairs']} clips in {how}; wrote {result.path}", markup=False, highlight=False
     )
+    constant = result.to_dict()["constant_inputs"]
+    if constant:
+        err_console.print(
+            f"{constant} of {result.estimator.config.x_dim} inputs never varied in training (a still "
+            "background, say); at inference they are held at their training value",
+            markup=False, highlight=False,
+        )  # fmt: skip
+    for line in held_out_lines(result.estimator.config.held_out):
+        err_console.print(line, markup=False, highlight=False)
+
+
+def held_out_lines(held_out: dict | None) -> list[str]:
+    """What the held-out check found, a line per parameter (or why there was none)."""
+    if not held_out:
+        return ["not checked on held-out clips: the dataset has no test or val split (--sims TRAIN,VAL,TEST)"]
+    how = "as users give them" if held_out["as_given"] else "as stored"
+    lines = [f"held-out check on {held_out['clips']} {held_out['split']} clips {how}:"]
+    for name, row in held_out["parameters"].items():
+        lines.append(
+            f"  {name}: 90 % interval holds the truth on {row['coverage90']:.0%}, "
+            f"median width {row['median_width90']:.0%} of the range"
+        )
+    lines += [f"  FAILED: {p}" for p in held_out["problems"]]
+    return lines
 
 
 @handle_errors()
@@ -167,7 +208,7 @@ def infer_cmd(
     given = dict(locals())
     from physinfer import api
     from physinfer.cli.app import options_from_cli
-    from physinfer.posterior.workflow import summary_lines
+    from physinfer.posterior.workflow import summary_lines, trust_lines
 
     report = api.infer(plugin, options_from_cli(api.InferOptions, given))
     if as_json:
@@ -180,6 +221,8 @@ def infer_cmd(
 
     if (verdict := verdict_line(report.adequacy)) is not None:
         err_console.print(verdict, markup=False, highlight=False)
+    for line in trust_lines(report):
+        err_console.print(line, markup=False, highlight=False)
     for line in summary_lines(report.marginals):
         err_console.print(line, highlight=False)
     for pair in report.correlations[:3]:
@@ -228,14 +271,19 @@ def calibration_cmd(
         return
     tol = summary["tolerance"]
     err_console.print(
-        f"[bold]coverage[/] on {summary['n_pairs']} held-out simulations "
-        f"(calibrated within ±{tol['coverage50']:.2f} / ±{tol['coverage90']:.2f})",
+        f"[bold]coverage[/] on {summary['n_pairs']} held-out simulations as users give videos "
+        f"(camera, H.264, infer's conditioning; calibrated within ±{tol['coverage50']:.2f} / "
+        f"±{tol['coverage90']:.2f}); as stored in brackets",
         highlight=False,
     )
+    stored = summary.get("in_memory", {}).get("parameters", {})
     for name, row in summary["parameters"].items():
+        raw = stored.get(name)
+        beside = f" [{raw['coverage90']:.2f}]" if raw else ""
         err_console.print(
-            f"  {name}: 50 % → {row['coverage50']:.2f}, 90 % → {row['coverage90']:.2f} ({row['verdict90']}); "
-            f"median error {row['median_abs_error']:.3g}, contraction {row['mean_contraction']:.2f}",
+            f"  {name}: 50 % → {row['coverage50']:.2f}, 90 % → {row['coverage90']:.2f}{beside} "
+            f"({row['verdict90']}); median error {row['median_abs_error']:.3g}, "
+            f"contraction {row['mean_contraction']:.2f}",
             highlight=False,
         )
     err_console.print(f"results in {Path(report.paths['report']).parent}", markup=False)

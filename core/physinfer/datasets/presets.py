@@ -383,7 +383,7 @@ PAPER_PRESET = DatasetPreset(
     clip=ClipFormat(n_frames=60, fps=25.0, height=300, width=300, channels=1),
     sims_per_unit=4,
     description="FlagSim as in the paper: 1,000/150/85 simulations, 14,000/3,800/3,500 renders, "
-    "60 frames at 25 fps, 300×300 (≈115 GB grayscale)",
+    "60 frames at 25 fps, 300×300 (≈345 GB RGB, ≈115 GB --gray)",
 )
 
 CPU_PRESET = DatasetPreset(
@@ -393,7 +393,7 @@ CPU_PRESET = DatasetPreset(
     clip=ClipFormat(n_frames=60, fps=25.0, height=224, width=224, channels=1),
     sims_per_unit=4,
     description="laptop-sized: 160/24/24 simulations, 8 renders each (1,280/192/192 renders), "
-    "60 frames at 25 fps, 224×224 grayscale (≈5 GB)",
+    "60 frames at 25 fps, 224×224 (≈15 GB RGB, ≈5 GB --gray)",
 )
 
 DEFAULT_PRESETS: dict[str, DatasetPreset] = {p.name: p for p in (PAPER_PRESET, CPU_PRESET)}

@@ -131,6 +131,15 @@ class EstimatorConfig:
             (``dataset generate --scene-range``); the estimator takes them as inputs after
             the embedding (:meth:`PosteriorEstimator.condition`) and accepts targets within
             the ranges. ``None``: trained on one scene.
+        targets: How the training clips reached the embedder: ``{"as_given": {camera,
+            seed}}`` (through a camera, H.264 and ``infer``'s conditioning,
+            :mod:`physinfer.as_given`) or ``None`` (the stored renders as they are).
+        inputs: The training inputs' range per dimension (``low``/``high``: 0.1 and 99.9 %
+            quantiles, ``mean``, ``std``, ``constant``: dimensions that never varied), from
+            which :meth:`PosteriorEstimator.input_check` tells a target the estimator was not
+            trained for; ``None`` for estimators older than the check.
+        held_out: The check ``posterior train`` made on held-out clips as given
+            (:mod:`physinfer.posterior.held_out`), or ``None``.
     """
 
     plugin: str
@@ -156,6 +165,9 @@ class EstimatorConfig:
     weights: str | None = None
     scene: dict[str, Any] | None = None
     scene_ranges: dict[str, list[float]] | None = None
+    targets: dict[str, Any] | None = None
+    inputs: dict[str, Any] | None = None
+    held_out: dict[str, Any] | None = None
 
     @property
     def parameter_space(self) -> ParameterSpace:
@@ -219,6 +231,14 @@ class PosteriorEstimator:
                 "them with --scene-set"
             )
         return np.concatenate([x, np.asarray(scene_context(ranges, scene), dtype=np.float32)])
+
+    def input_check(self, x: np.ndarray) -> tuple[np.ndarray, dict[str, Any] | None]:
+        """``(x, record)``: the estimator's input checked against its training inputs
+        (:func:`physinfer.posterior.inputs.check_inputs`; ``record`` is ``None`` for an
+        estimator trained before the check)."""
+        from physinfer.posterior.inputs import check_inputs
+
+        return check_inputs(self.config.inputs, x)
 
     def sample_unit(self, x: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
         """``(n, D)`` posterior samples in normalised coordinates for one embedding ``(E,)``."""
@@ -344,7 +364,7 @@ class PosteriorEstimator:
         Raises:
             UserInputError: naming both scenes and how to get a matching estimator.
         """
-        from physinfer.scene import default_scene, same_scene, scene_text
+        from physinfer.scene import default_scene, same_scene, scene_remedy, scene_text
 
         ranges = self.config.scene_ranges or {}
         where = f"{path} " if path else ""
@@ -362,8 +382,8 @@ class PosteriorEstimator:
                 return
             why = "; ".join(outside) if outside else f"its other settings were {scene_text(trained)}"
             raise UserInputError(
-                f"the posterior estimator {where}does not cover this scene ({why}); train one on a "
-                "dataset that does (`physinfer dataset generate --scene-range ...`, then `physinfer posterior train`)"
+                f"the posterior estimator {where}does not cover this scene ({why}); "
+                + scene_remedy(phenomenon, scene)
             )
         if same_scene(phenomenon, self.config.scene, scene):
             return
@@ -372,8 +392,8 @@ class PosteriorEstimator:
             for s in (self.config.scene, scene)
         )
         raise UserInputError(
-            f"the posterior estimator {where}was trained on clips of {trained}, not of {given}; train one on a dataset of this scene (`physinfer dataset generate "
-            "--scene-set ...`, then `physinfer posterior train`)"
+            f"the posterior estimator {where}was trained on clips of {trained}, not of {given}; "
+            + scene_remedy(phenomenon, scene)
         )
 
     def check_embedder(self, embedder: Any) -> None:

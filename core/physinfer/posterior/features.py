@@ -56,6 +56,7 @@ class EmbeddedSet:
     cache: Path
     scene_ranges: dict[str, list[float]] = field(default_factory=dict)
     context: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.float32))
+    as_given: dict[str, Any] | None = None
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -76,10 +77,27 @@ class EmbeddedSet:
         )
 
 
-def cache_key(dataset: ClipDataset, embedder_info: Mapping[str, Any]) -> str:
-    """A short hash naming what the cached embeddings depend on: the dataset's manifest
-    and the embedder's identity (name, frames, weights digest)."""
-    ident = {"manifest": file_digest(dataset.root / MANIFEST_FILE), "embedder": dict(embedder_info)}
+@dataclass(frozen=True)
+class TargetPath:
+    """Clips embedded as users give them: :func:`physinfer.as_given.as_given` with this
+    camera model, the per-clip effects drawn from ``seed``."""
+
+    phenomenon: Any
+    camera: Any  # physinfer.as_given.CameraModel
+    seed: int = 0
+
+    def identity(self) -> dict[str, Any]:
+        return {"camera": self.camera.to_dict(), "seed": int(self.seed)}
+
+
+def cache_key(
+    dataset: ClipDataset, embedder_info: Mapping[str, Any], as_given: Mapping[str, Any] | None = None
+) -> str:
+    """A short hash naming what the cached embeddings depend on: the dataset's manifest,
+    the embedder's identity (name, frames, weights digest) and the target path, if any."""
+    ident: dict[str, Any] = {"manifest": file_digest(dataset.root / MANIFEST_FILE), "embedder": dict(embedder_info)}
+    if as_given is not None:
+        ident["as_given"] = dict(as_given)
     return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -90,6 +108,7 @@ def embed_dataset(
     embedder_info: Mapping[str, Any],
     *,
     on_progress: Callable[[int, int], None] | None = None,
+    as_given: TargetPath | None = None,
 ) -> EmbeddedSet:
     """Embed every clip of ``split`` (or read the cache), resuming a partial cache.
 
@@ -100,6 +119,7 @@ def embed_dataset(
         embedder_info: JSON-ready identity of ``embedder`` (name, frames, weights digest):
             a different identity gets its own cache file.
         on_progress: Called as ``(done, total)`` after each chunk.
+        as_given: Embed the clips as users give them (see the module), or ``None``: as stored.
 
     Raises:
         UserInputError: an empty split, or clips whose embedding is not finite.
@@ -109,7 +129,7 @@ def embed_dataset(
         raise UserInputError(
             f"split {split!r} of {dataset.root} holds no clips; generate it with --sims TRAIN,VAL,TEST"
         )
-    key = cache_key(dataset, embedder_info)
+    key = cache_key(dataset, embedder_info, as_given.identity() if as_given else None)
     final = dataset.root / CACHE_DIR / f"{key}-{split}.npz"
     partial = final.with_suffix(".partial.npz")
     clip_ids = _clip_identities(dataset)
@@ -120,7 +140,7 @@ def embed_dataset(
         done = len(done_x)
         while done < total:
             stop = min(done + CHUNK, total)
-            parts.append(_embed_range(dataset, embedder, done, stop))
+            parts.append(_embed_range(dataset, embedder, done, stop, as_given, split))
             done = stop
             x = np.concatenate(parts)
             atomic_save_npz(
@@ -143,6 +163,7 @@ def embed_dataset(
         final,
         dict(dataset.scene_ranges),
         _scene_context(dataset),
+        as_given.identity() if as_given else None,
     )
 
 
@@ -203,8 +224,31 @@ def _read_cached(path: Path, key: str, clip_ids: list[str]) -> np.ndarray:
     return x[:good] if good else empty
 
 
-def _embed_range(dataset: ClipDataset, embedder: Embedder, start: int, stop: int) -> np.ndarray:
+SPLIT_CODES = {"train": 0, "val": 1, "test": 2}
+
+
+def _embed_range(
+    dataset: ClipDataset,
+    embedder: Embedder,
+    start: int,
+    stop: int,
+    as_given: TargetPath | None = None,
+    split: str = "train",
+) -> np.ndarray:
     clips = [as_clip(dataset[i], dataset.fps) for i in range(start, stop)]
+    if as_given is not None:
+        from physinfer.as_given import as_given as through_user_path
+
+        clips = [
+            through_user_path(
+                clip,
+                phenomenon=as_given.phenomenon,
+                embedder=embedder,
+                model=as_given.camera,
+                rng=np.random.default_rng([as_given.seed, SPLIT_CODES.get(split, 3), start + k]),
+            )[0]
+            for k, clip in enumerate(clips)
+        ]
     x = np.asarray(embedder.embed_many(clips), dtype=np.float32)
     bad = ~np.isfinite(x).all(axis=1)
     if bad.any():

@@ -41,6 +41,11 @@ class PosteriorReport:
         target_conditions: How a user's video was framed (:mod:`physinfer.conditioning`).
         adequacy: Whether the posterior's median reproduces the video
             (:func:`physinfer.adequacy.predictive_check`), or ``None`` when not checked.
+        inputs: How the video's embedding compares with the estimator's training inputs
+            (:meth:`PosteriorEstimator.input_check`), or ``None`` (an older estimator).
+        degenerate: Why the posterior is degenerate (every sample of a parameter at one
+            value), or ``None``.
+        notes: What was left out of the results and why (a corner plot not drawn).
     """
 
     marginals: dict[str, dict[str, Any]]
@@ -55,6 +60,9 @@ class PosteriorReport:
     space: ParameterSpace | None = field(default=None, repr=False)
     target_conditions: dict[str, Any] | None = None
     adequacy: dict[str, Any] | None = None
+    inputs: dict[str, Any] | None = None
+    degenerate: str | None = None
+    notes: list[str] = field(default_factory=list)
 
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
@@ -81,6 +89,12 @@ class PosteriorReport:
             d["target_conditions"] = self.target_conditions
         if self.adequacy is not None:
             d["adequacy"] = self.adequacy
+        if self.inputs is not None:
+            d["inputs"] = self.inputs
+        if self.degenerate is not None:
+            d["degenerate"] = self.degenerate
+        if self.notes:
+            d["notes"] = list(self.notes)
         if self.truth:
             d["truth"] = self.truth
             d["truth_in_ci90"] = {
@@ -103,7 +117,7 @@ def posterior_of_clip(
     """Sample the posterior of one clip and summarise it; ``scene``: the target's complete
     scene, which an estimator trained across scene ranges takes as input."""
     t0 = time.perf_counter()
-    x = estimator.condition(embed_target(estimator, embedder, clip), scene)
+    x, inputs = estimator.input_check(estimator.condition(embed_target(estimator, embedder, clip), scene))
     t1 = time.perf_counter()
     samples = estimator.sample_unit(x, n_samples, seed=seed)
     t2 = time.perf_counter()
@@ -116,8 +130,21 @@ def posterior_of_clip(
         estimator=Path("."),
         seconds={"embed": t1 - t0, "sample": t2 - t1},
         space=space,
+        inputs=inputs,
+        degenerate=degenerate_reason(samples, space.names),
     )
     return report
+
+
+def degenerate_reason(samples_unit: np.ndarray, names: Sequence[str]) -> str | None:
+    """Why a posterior is degenerate — a parameter whose samples all sit at one value — or
+    ``None``. Such a posterior is no measurement: an estimator pushed outside what it was
+    trained on can put all its mass in one place (a spring's damping at "0.2987–0.2987")."""
+    spread = np.quantile(samples_unit, 0.95, axis=0) - np.quantile(samples_unit, 0.05, axis=0)
+    for i, name in enumerate(names):
+        if spread[i] < 1e-3:
+            return f"every sample of {name} lies at one value (90 % of them within 0.05 % of its range)"
+    return None
 
 
 @with_refinement_threads
@@ -221,12 +248,46 @@ def write_report(
         samples_unit=report.samples_unit,
     )
     report.paths["samples"] = str(out / "samples.npz")
-    report.paths["corner"] = str(corner_plot(report, space, out / "corner.png", title=title))
+    if report.degenerate is None:
+        try:
+            report.paths["corner"] = str(corner_plot(report, space, out / "corner.png", title=title))
+        except (ValueError, MemoryError) as exc:  # a plot never costs the answer
+            report.notes.append(f"corner plot skipped: it could not be drawn ({exc})")
+    else:
+        report.notes.append(f"corner plot skipped: the posterior is degenerate ({report.degenerate})")
     report.paths["posterior"] = str(out / "posterior.json")
     atomic_write_json(out / "posterior.json", report.to_dict())
     from physinfer.report import write_report_quietly  # report.html; a failure only warns
 
     write_report_quietly(out)
+
+
+def _first_clause(exc: Exception) -> str:
+    """The reason of a refusal, without its remedy (after the first semicolon)."""
+    return str(exc).split("; ")[0]
+
+
+def trust_lines(report: PosteriorReport) -> list[str]:
+    """Printed before the intervals when they should not be trusted: a degenerate
+    posterior, a video whose embedding lies outside the estimator's training inputs."""
+    lines = []
+    if report.degenerate:
+        lines.append(
+            f"degenerate posterior: {report.degenerate}; the estimator was not trained on videos like this "
+            "one: measure it with `physinfer refine --no-posterior`, or train on clips like it"
+        )
+    inputs = report.inputs or {}
+    if inputs.get("extrapolating"):
+        lines.append(
+            f"warning: the video's embedding lies outside the estimator's training clips in {inputs['outside']} "
+            f"of {inputs['dimensions']} inputs (up to {inputs['worst_sd']:g} training SDs): the intervals are "
+            "extrapolated, not calibrated for it"
+        )
+    if inputs.get("held"):
+        lines.append(
+            f"note: {inputs['held']} inputs the training clips never varied were held at their training value"
+        )
+    return lines + [f"note: {n}" for n in report.notes]
 
 
 def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
@@ -266,7 +327,9 @@ def posterior_for_refinement(
     target shorter than its clips) is the user's error. Without it, the phenomenon's shipped
     estimator is used when it applies; when it does not (effects switched in, parameters
     held by ``--fix``, a short target, another ``scene`` than its training clips') the
-    refinement goes on without it and the reason is returned instead. ``scene``: the
+    refinement goes on without it and the reason is returned instead; so it does, given or
+    shipped, when the posterior of this clip is degenerate or extrapolated (a search started
+    there starts in the wrong place). ``scene``: the
     complete scene (:func:`physinfer.scene.resolve_scene`), ``None`` for the default.
 
     Returns:
@@ -295,6 +358,23 @@ def posterior_for_refinement(
     except UserInputError as exc:
         if posterior is not None:
             raise
-        return None, f"the plugin's posterior estimator does not apply to this refinement: {exc}"
+        return None, f"searching without a posterior: the plugin's estimator does not apply ({_first_clause(exc)})"
     report.estimator = path
+    distrust = _distrust(report)
+    if distrust is not None:  # a search started from it would start in the wrong place
+        return None, f"searching without a posterior: {distrust}"
     return report, None
+
+
+def _distrust(report: PosteriorReport) -> str | None:
+    """Why a refinement should not start from ``report`` (degenerate, or the video outside
+    what the estimator was trained on), or ``None``."""
+    if report.degenerate:
+        return f"the estimator's posterior of this video is degenerate ({report.degenerate})"
+    inputs = report.inputs or {}
+    if inputs.get("extrapolating"):
+        return (
+            f"the video's embedding lies outside the estimator's training clips in {inputs['outside']} of "
+            f"{inputs['dimensions']} inputs"
+        )
+    return None

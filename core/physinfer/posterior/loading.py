@@ -108,7 +108,7 @@ def _shipped_for_scene(
         try:
             estimator.check_scene(phenomenon, scene, path)
         except UserInputError as exc:
-            refusals.append(str(exc) if path == default else _coverage(estimator, path))
+            refusals.append(str(exc) if path == default else _coverage(estimator, path, phenomenon))
             continue
         return estimator, path
     if not others:
@@ -116,11 +116,14 @@ def _shipped_for_scene(
     raise UserInputError(f"{refusals[0]} (the plugin's other shipped estimators: {'; '.join(refusals[1:])})")
 
 
-def _coverage(estimator: PosteriorEstimator, path: Path) -> str:
-    """``posterior_sizes.safetensors covers flag_height 0.6..2, flag_length 0.9..3``."""
+def _coverage(estimator: PosteriorEstimator, path: Path, phenomenon: Any) -> str:
+    """``posterior_sizes.safetensors covers flag_height 0.6..2, flag_length 0.9..3 (pinning=hoist, ...)``."""
+    from physinfer.scene import default_scene, scene_text
+
     ranges = estimator.config.scene_ranges or {}
     spans = ", ".join(f"{name} {low:g}..{high:g}" for name, (low, high) in sorted(ranges.items()))
-    return f"{path.name} covers {spans or 'its own scene only'}"
+    fixed = {k: v for k, v in {**default_scene(phenomenon), **(estimator.config.scene or {})}.items() if k not in ranges}
+    return f"{path.name} covers {spans or 'its own scene only'}" + (f" ({scene_text(fixed)})" if fixed else "")
 
 
 def estimator_embedder(

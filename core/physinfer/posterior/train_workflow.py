@@ -8,9 +8,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from physinfer.as_given import CameraModel
 from physinfer.errors import UserInputError
 from physinfer.io import check_output_dir
 from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator, resolve_device
+from physinfer.posterior.features import TargetPath, embed_dataset
 from physinfer.posterior.fingerprint import embedder_probe
 from physinfer.posterior.loading import ProgressFn, build_embedder, check_dataset, no_progress
 from physinfer.registry import Registry
@@ -39,6 +43,9 @@ class TrainResult:
             "scene": c.scene,
             "scene_ranges": c.scene_ranges,
             "embeddings_cache": str(self.cache),
+            "targets": c.targets,
+            "constant_inputs": len((c.inputs or {}).get("constant", [])),
+            "held_out": c.held_out,
             "seconds": self.seconds,
         }
 
@@ -72,16 +79,27 @@ def train_posterior(
     split: str = "train",
     network: NetworkConfig | None = None,
     seed: int = 0,
+    as_given: bool = True,
+    accept_miscalibrated: bool = False,
     progress: ProgressFn = no_progress,
 ) -> TrainResult:
     """Embed a dataset's clips (cached beside it) and train q(θ | s(x)) with sbi's NPE.
 
+    ``as_given``: embed the clips as users give videos (:mod:`physinfer.as_given`: camera
+    effects, H.264, ``infer``'s conditioning), so that the estimator is trained on what it
+    will be asked about; ``False``: the stored renders as they are.
+
+    Before writing, the estimator is checked on the dataset's held-out clips (the ``test``
+    split, else ``val``), sent down the same path (:mod:`physinfer.posterior.held_out`): one
+    whose 90 % intervals miss the truth too often or collapse to points is refused, with
+    what to change, unless ``accept_miscalibrated`` (then written, with the check recorded).
+
     Raises:
         UserInputError: a dataset of another phenomenon or without θ, clips shorter than
-            the embedder reads, or too few clips.
+            the embedder reads, grayscale clips for an embedder that reads colour, too few
+            clips, or an estimator that fails the held-out check.
     """
     from physinfer.datasets.loader import ClipDataset
-    from physinfer.posterior.features import embed_dataset
     from physinfer.posterior.training import train_estimator
 
     network = network or NetworkConfig()
@@ -106,6 +124,7 @@ def train_posterior(
             f"{emb.n_frames} frames at {emb.fps:g} fps ({emb.n_frames / emb.fps:.2f} s); generate longer "
             "clips (dataset generate --frames N) or lower --embedder-frames"
         )
+    check_clip_colour(dataset, emb, name)
     probe = embedder_probe(emb)
     identity = {
         "plugin": plugin,
@@ -118,12 +137,15 @@ def train_posterior(
         "clip_seconds": float(clip_seconds),
     }
     t0 = time.perf_counter()
+    path = TargetPath(pipeline.phenomenon, CameraModel(), seed) if as_given else None
+    embedder_info = {k: identity[k] for k in ("embedder", "embedder_frames", "embedder_fps", "probe")}
     pairs = embed_dataset(
         data,
         split,
         emb,
-        {k: identity[k] for k in ("embedder", "embedder_frames", "embedder_fps", "probe")},
+        embedder_info,
         on_progress=lambda done, total: progress("embedding", done, total),
+        as_given=path,
     )
     t1 = time.perf_counter()
     estimator = train_estimator(
@@ -139,9 +161,88 @@ def train_posterior(
     if scene is not None:  # the clips' scene: targets of another one get no intervals from it
         estimator.config = replace(estimator.config, scene=dict(scene))
     t2 = time.perf_counter()
+    held_out = _check_held_out(estimator, data, split, emb, embedder_info, path, progress)
+    estimator.config = replace(estimator.config, held_out=held_out)
+    if held_out and held_out["problems"] and not accept_miscalibrated:
+        raise UserInputError(_refusal(held_out, data, as_given))
+    t3 = time.perf_counter()
     estimator.save(out)
     pipeline.renderer.close()
-    return TrainResult(estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1})
+    return TrainResult(
+        estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1, "held_out_check": t3 - t2}
+    )
+
+
+def check_clip_colour(dataset: Any, embedder: Any, name: str) -> None:
+    """Refuse grayscale clips for an embedder that reads colour: targets arrive in colour,
+    and an estimator trained without it meets inputs it never saw."""
+    if dataset.clip_format.channels != 1 or not reads_colour(embedder):
+        return
+    raise UserInputError(
+        f"{dataset.root} stores grayscale clips, but the embedder {name!r} reads colour and videos arrive "
+        "in colour; generate the dataset in colour (`physinfer dataset generate` without --gray)"
+    )
+
+
+def reads_colour(embedder: Any) -> bool:
+    """Whether ``embedder`` tells a colour clip from its grayscale (BT.601 luma) version."""
+    from physinfer.posterior.fingerprint import probe_clip
+    from physinfer.types import Clip
+    from physinfer.video import to_gray
+
+    probe = probe_clip(int(embedder.n_frames), float(embedder.fps))
+    frames = probe.frames.astype(np.float32)
+    tint = np.array([1.3, 0.8, 0.6], dtype=np.float32)  # a colour clip with the probe's motion
+    coloured = np.clip(frames * tint, 0, 255).astype(np.uint8)
+    luma = np.rint(to_gray(coloured) * 255.0).astype(np.uint8)
+    gray = np.repeat(luma[..., None], 3, axis=-1)
+    a = np.asarray(embedder.embed(Clip(coloured, probe.fps)), dtype=np.float64)
+    b = np.asarray(embedder.embed(Clip(gray, probe.fps)), dtype=np.float64)
+    return bool(np.linalg.norm(a - b) > 1e-3 * max(np.linalg.norm(a), 1e-12))
+
+
+def _check_held_out(
+    estimator: PosteriorEstimator,
+    data: Path,
+    split: str,
+    embedder: Any,
+    embedder_info: dict[str, Any],
+    path: TargetPath | None,
+    progress: ProgressFn,
+) -> dict[str, Any] | None:
+    """The held-out check on the dataset's ``test`` (else ``val``) split, or ``None`` when
+    it has no held-out clips."""
+    from physinfer.datasets.loader import ClipDataset
+    from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
+
+    held = next((s for s in ("test", "val") if s != split and len(ClipDataset(data, s)) > 0), None)
+    if held is None:
+        return None
+    pairs = embed_dataset(
+        data, held, embedder, embedder_info, as_given=path,
+        on_progress=lambda done, total: progress("held-out clips", done, total),
+    )  # fmt: skip
+    rows = slice(0, min(len(pairs), MAX_CLIPS))
+    x = np.stack([estimator.input_check(row)[0] for row in pairs.conditions[rows]])
+    samples = estimator.sample_unit_batched(x, SAMPLES, seed=0)
+    check = held_out_check(pairs.theta_unit[rows].astype(np.float64), samples, estimator.parameter_space.names)
+    return {"split": held, "as_given": path is not None, **check}
+
+
+def _refusal(held_out: dict[str, Any], data: Path, as_given: bool) -> str:
+    """The refusal of an estimator that failed the held-out check, with what to change."""
+    fixes = [
+        "an ensemble of flows (--ensemble 5: their mixture is wider where they disagree)",
+        "more training clips (dataset generate --sims N)",
+        "a longer clip or another embedder (--embedder, --embedder-frames)",
+    ]
+    if not as_given:
+        fixes.insert(0, "train on clips as users give them (drop --stored)")
+    return (
+        f"the estimator failed its check on {held_out['clips']} held-out clips of {data} "
+        f"({held_out['split']} split): {'; '.join(held_out['problems'])}. Its intervals would be wrong on "
+        f"videos; try {', or '.join(fixes)}. Nothing was written (--accept-miscalibrated writes it anyway)"
+    )
 
 
 def _estimator_path(out: Path) -> Path:

@@ -27,6 +27,7 @@ from physinfer.posterior.estimator import (
     to_unbounded,
 )
 from physinfer.posterior.features import EmbeddedSet
+from physinfer.posterior.inputs import input_statistics
 
 #: Epochs between two progress reports.
 EPOCHS_PER_REPORT = 5
@@ -96,6 +97,8 @@ def train_estimator(
         x_dim=int(x.shape[1]),
         network=network,
         scene_ranges={k: list(v) for k, v in pairs.scene_ranges.items()} or None,
+        targets={"as_given": dict(pairs.as_given)} if pairs.as_given else None,
+        inputs=input_statistics(pairs.conditions),
     )
     config = replace(config, training={**config.training, **training})
     trained = PosteriorEstimator(config, estimator.cpu(), "cpu")

@@ -21,6 +21,7 @@ from physinfer.posterior.infer_workflow import (
     posterior_for_refinement,
     posterior_of_clip,
     summary_lines,
+    trust_lines,
     write_report,
 )
 from physinfer.posterior.loading import (
@@ -49,5 +50,6 @@ __all__ = [
     "posterior_of_clip",
     "summary_lines",
     "train_posterior",
+    "trust_lines",
     "write_report",
 ]

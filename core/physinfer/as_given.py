@@ -1,0 +1,122 @@
+"""Clips as users give them: what a camera and a file do to a rendered clip, and the path a
+user's video takes before it is embedded.
+
+An estimator trained on clips straight from the renderer meets, at inference, a video that
+went through a camera (white balance, blur, sensor noise), an H.264 encoder, a decoder and
+:func:`physinfer.conditioning.condition_target`. Where the renders are exactly still (a
+plain wall), an embedding has dimensions that never vary in training and carry codec noise
+in every target: a spring estimator trained on such clips put the whole posterior on a bound
+for every mp4 target while its calibration on the training format said "calibrated" (issue
+44). :func:`as_given` sends a training or held-out clip down the user's path instead, with
+camera effects drawn per clip from :class:`CameraModel`, so the estimator learns and is
+checked on what it will be given.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physinfer.errors import UserInputError
+from physinfer.types import Clip
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Ranges the camera effects of one clip are drawn from (uniformly, per clip).
+
+    Attributes:
+        crf: libx264's quality range (18 near-transparent, 23 its default, phones 23–28,
+            35 a heavily compressed upload).
+        noise: Sensor noise, standard deviation in grey levels (of 255).
+        gain: Per-channel white-balance gain (each of R, G, B drawn independently).
+        blur_share: Share of clips blurred (focus, motion) …
+        blur: … with a Gaussian of this standard deviation in pixels.
+    """
+
+    crf: tuple[int, int] = (18, 35)
+    noise: tuple[float, float] = (0.0, 3.0)
+    gain: tuple[float, float] = (0.85, 1.15)
+    blur_share: float = 0.3
+    blur: tuple[float, float] = (0.3, 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready ranges (an estimator's configuration records them)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CameraModel:
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+    def draw(self, rng: np.random.Generator) -> dict[str, Any]:
+        """The effects of one clip: ``{crf, noise, gain (3,), blur}`` (blur 0: none)."""
+        blurred = rng.uniform() < self.blur_share
+        return {
+            "crf": int(rng.integers(self.crf[0], self.crf[1] + 1)),
+            "noise": float(rng.uniform(*self.noise)),
+            "gain": rng.uniform(*self.gain, size=3),
+            "blur": float(rng.uniform(*self.blur)) if blurred else 0.0,
+        }
+
+
+def camera(clip: Clip, effects: dict[str, Any], rng: np.random.Generator) -> Clip:
+    """``clip`` through a camera and a file: white balance, blur and sensor noise, then an
+    H.264 encoding at ``effects["crf"]`` read back. A grayscale clip is seen as colour."""
+    from physinfer.video import read_video, write_video
+
+    frames = np.asarray(clip.frames, dtype=np.float32)
+    if frames.ndim == 3:
+        frames = frames[..., None]
+    if frames.shape[-1] == 1:
+        frames = np.repeat(frames, 3, axis=-1)
+    frames = frames * np.asarray(effects["gain"], dtype=np.float32)
+    if effects["blur"] > 0:
+        frames = _gaussian_blur(frames, effects["blur"])
+    if effects["noise"] > 0:
+        frames = frames + rng.normal(0.0, effects["noise"], frames.shape).astype(np.float32)
+    pixels = np.clip(np.rint(frames), 0, 255).astype(np.uint8)
+    with tempfile.TemporaryDirectory(prefix="physinfer-as-given-") as folder:
+        path = write_video(Path(folder) / "clip.mp4", pixels, clip.fps, crf=effects["crf"])
+        back = read_video(path)
+    height, width = pixels.shape[1:3]
+    return Clip(back.frames[: len(pixels), :height, :width], clip.fps)
+
+
+def _gaussian_blur(frames: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian blur over the two image axes of ``(T, H, W, C)`` frames."""
+    from scipy.ndimage import gaussian_filter
+
+    return gaussian_filter(frames, sigma=(0.0, sigma, sigma, 0.0), mode="nearest", truncate=3.0)
+
+
+def as_given(
+    clip: Clip,
+    *,
+    phenomenon: Any,
+    embedder: Any,
+    model: CameraModel,
+    rng: np.random.Generator,
+) -> tuple[Clip, bool]:
+    """``clip`` as ``infer`` would see it had a user filmed it: :func:`camera`, then the
+    conditioning ``infer`` applies to a user's file (framing or the still-background freeze;
+    no ζ estimate, as ``infer`` makes none).
+
+    Returns:
+        ``(clip, conditioned)``: ``conditioned`` is ``False`` when the conditioning refuses
+        the clip (e.g. two things move) — as it would refuse such a target — and the clip is
+        then returned through the camera only.
+    """
+    from physinfer.conditioning import Conditioning, condition_target
+
+    filmed = camera(clip, model.draw(rng), rng)
+    try:
+        conditioned, _zeta, _record = condition_target(
+            phenomenon, embedder, filmed, Conditioning(estimate_render=False), {}
+        )
+    except UserInputError:
+        return filmed, False
+    return conditioned, True
