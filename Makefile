@@ -95,9 +95,10 @@ pretrained: install
 		print(export_weights('runs/sdn-cpu', info={'made_by': 'make pretrained'}))"
 
 # The flag's shipped posterior estimator: 800 training and 200 held-out 2.4-s simulations
-# (resumes; about 25 min on 2 cores), embedded by the spectral embedder over all 60 frames
-# (cached beside the data), five seeded MAFs with sbi (about a minute), then the calibration
-# check on the held-out split.
+# (resumes; about 25 min on 2 cores), sent through camera effects, H.264 and infer's
+# conditioning as users' videos are and embedded by the spectral embedder over all 60 frames
+# (cached beside the data), five seeded MAFs with sbi (about a minute), checked on the held-out
+# split as given before writing, then the calibration (as given, and as stored beside it).
 posterior: install
 	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
 		--frames 60 --size 224 --gray --seed 21 --out runs/flag-posterior
@@ -122,9 +123,10 @@ posterior-sizes: install
 		--out runs/flag-posterior-sizes-calibration
 
 # The pendulum's shipped estimator: 1,200 training and 300 held-out 8-s simulations with every
-# look randomised (64 px RGB; about 10 min on 2 cores), embedded by the motion embedder over
-# the first 8 s (160 frames at 20 fps), three seeded neural spline flows, then the calibration
-# check on the held-out split.
+# look randomised (64 px RGB; about 10 min on 2 cores), sent through camera effects, H.264 and
+# infer's conditioning and embedded by the motion embedder over the first 8 s (160 frames at
+# 20 fps), three seeded neural spline flows, checked on the held-out split as given, then the
+# calibration.
 posterior-pendulum: install
 	$(BIN)/physinfer dataset generate --plugin pendulum --sims 1200,0,300 --renders-per-sim 1 \
 		--frames 200 --size 64 --rgb --seed 41 --out runs/pendulum-posterior

@@ -302,3 +302,16 @@ def test_train_prints_the_held_out_check_a_line_per_parameter_or_why_there_was_n
     assert lines[0] == "held-out check on 40 test clips as users give them:"
     assert lines[1] == "  a: 90 % interval holds the truth on 90%, median width 12% of the range"
     assert lines[-1] == "  FAILED: b: collapsed"
+
+
+def test_a_constant_input_is_held_at_its_exact_training_value_not_a_rounded_one():
+    # sbi standardises a constant input by a spread of ~0: a value six digits off reads as
+    # thousands of standard deviations (it put a flag estimator's wind on its bounds)
+    from physinfer.posterior.inputs import check_inputs
+
+    rng = np.random.default_rng(5)
+    x_train = np.concatenate([rng.normal(size=(200, 2)), np.full((200, 1), 0.1234567891)], axis=1).astype(np.float32)
+    stats = input_statistics(x_train)
+    assert stats["constant"] == [2]
+    x, _ = check_inputs(stats, np.array([0.0, 0.0, 0.1234567891], dtype=np.float32))
+    assert x[2] == x_train[0, 2]  # bit for bit

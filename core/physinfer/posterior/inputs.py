@@ -30,6 +30,7 @@ def input_statistics(x: np.ndarray) -> dict[str, Any]:
     x = np.asarray(x, dtype=np.float64)
     sd = x.std(axis=0)
     scale = float(max(np.sqrt(np.mean(sd**2)), 1e-12)) if x.size else 1.0
+    constant = np.flatnonzero(sd <= 1e-6 * scale)
 
     def six(values: np.ndarray) -> list[float]:  # six significant digits: small and exact enough
         return [float(f"{v:.6g}") for v in values]
@@ -40,7 +41,10 @@ def input_statistics(x: np.ndarray) -> dict[str, Any]:
         "mean": six(x.mean(axis=0)),
         "std": six(sd),
         "scale": scale,
-        "constant": np.flatnonzero(sd <= 1e-6 * scale).tolist(),
+        "constant": constant.tolist(),
+        # exact, not to six digits: the flow standardises a constant input by a spread of ~0,
+        # so a value held a rounding away from its training value reads as thousands of SDs
+        "constant_values": [float(np.float32(v)) for v in x[0, constant]] if len(x) else [],
     }
 
 
@@ -63,9 +67,10 @@ def check_inputs(stats: dict[str, Any] | None, x: np.ndarray) -> tuple[np.ndarra
     mean, sd = np.asarray(stats["mean"]), np.asarray(stats["std"])
     tiny = 1e-3 * float(stats.get("scale", 1.0))  # below this, a difference is numerical residue
     constant = np.asarray(stats.get("constant", []), dtype=int)
-    held = int(np.sum(np.abs(x[constant] - mean[constant]) > tiny)) if constant.size else 0
+    values = np.asarray(stats.get("constant_values", mean[constant]), dtype=np.float32)
+    held = int(np.sum(np.abs(x[constant] - values) > tiny)) if constant.size else 0
     if constant.size:
-        x[constant] = mean[constant]
+        x[constant] = values
     margin = 0.1 * (high - low) + tiny
     outside = (x < low - margin) | (x > high + margin)
     worst = float(np.max(np.abs(x - mean) / np.maximum(sd, tiny))) if x.size else 0.0

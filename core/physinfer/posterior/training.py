@@ -126,7 +126,7 @@ def _train_one(
         prior=None, density_estimator=network.builder(), device=device, show_progress_bars=False,
         tracker=_NoTracker(),
     )  # fmt: skip
-    inference.append_simulations(theta, x)
+    _quiet(inference.append_simulations, theta=theta, x=x)  # its z-scoring warnings: ours are in the file
     settings = {
         "training_batch_size": network.batch_size,
         "learning_rate": network.learning_rate,
