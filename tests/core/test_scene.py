@@ -125,8 +125,16 @@ def test_a_dataset_records_its_scene_and_estimators_refuse_another(registry):
     with pytest.raises(
         UserInputError,
         match=r"trained on clips of the default scene, not of the scene flag_length=3,",
-    ):
+    ) as refused:
         estimator.check_scene(flag, scene, path)
+    # the way forward: the commands that make an estimator for this scene, or refine without one
+    corners = resolve_scene(flag, {"pinning": "corners", "flag_length": 3, "flag_height": 2})
+    with pytest.raises(UserInputError) as refused:
+        estimator.check_scene(flag, corners, path)
+    text = str(refused.value)
+    assert "physinfer dataset generate --plugin flag --scene-set flag_height=2 --scene-set flag_length=3" in text
+    assert "--scene-set pinning=corners" in text and "physinfer posterior train --plugin flag" in text
+    assert "physinfer refine --plugin flag" in text and "which searches without a posterior" in text
 
 
 def test_run_json_records_the_scene_and_a_resume_with_another_is_refused(registry, tmp_path):
@@ -145,6 +153,8 @@ def test_run_json_records_the_scene_and_a_resume_with_another_is_refused(registr
         "trained on clips of the default scene, not of the scene flag_length=0.5"
         in result.extra["posterior_note"]
     )
+    assert result.extra["posterior_note"].startswith("searching without a posterior: ")
+    assert "\n" not in result.extra["posterior_note"] and "dataset generate" not in result.extra["posterior_note"]
     log = (out / "trials.jsonl").read_bytes()
     for other, expected in (
         ({**SMALL, "flag_length": "0.6"}, "--scene-set flag_length: run 0.5, now 0.6"),
