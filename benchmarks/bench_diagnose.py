@@ -87,6 +87,21 @@ def flag_lite(**config: Any) -> Any:
     return dataclasses.replace(full, parameter_space=lite_space, make_simulator=make)
 
 
+def importable(function: Any) -> Any:
+    """``function`` as imported from this file by its module name: a diagnosis' worker
+    processes do not import the parent's ``__main__`` (physinfer.datasets.executors), so a
+    registry factory pickled as ``__main__.load_bench_registry`` could not be read there (a
+    pendulum table with ``--workers 2`` stopped on it). ``sys.path`` reaches the workers."""
+    if function.__module__ != "__main__":
+        return function
+    import importlib
+
+    folder = str(Path(__file__).resolve().parent)
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    return getattr(importlib.import_module(Path(__file__).stem), function.__name__)
+
+
 def load_bench_registry(frames: int | None = None) -> Any:
     """The installed plugins plus the benchmark's ``flag_lite`` phenomenon (``frames`` long clips)."""
     from physinfer.plugins import load_registry
@@ -248,7 +263,7 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
             limits=not args.no_limits,
             screen=not args.no_screen if screen is None else screen,
             workers=workers,
-            registry_factory=functools.partial(load_bench_registry, args.frames),
+            registry_factory=functools.partial(importable(load_bench_registry), args.frames),
         ),
     )
     row = {

@@ -169,6 +169,47 @@ def _probe_path(
     return points
 
 
+def _probe_all(
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    theta: dict[str, float],
+    target_embedding: np.ndarray,
+    rounds: int,
+    effect_objs: Mapping[str, Any],
+    seeds: list[int],
+    probe: Probe,
+    say: Log,
+) -> dict[str, dict[str, Any]]:
+    """Every effect's ridge points with ``probe`` (see :func:`ridge_starts`)."""
+    from physinfer.discrepancy.candidates import augmented_pipeline
+    from physinfer.session import fixed_by_user
+
+    space = base.simulator.parameter_space
+    goal = np.asarray(target_embedding, dtype=np.float64)
+    emb0, _ = probe.clips(base, [theta] * len(seeds), seeds)
+    jac, _ = jacobian(probe, theta, emb0, seeds, JACOBIAN_STEP)
+    d0 = _distance(goal, emb0)
+    u0 = space.to_unit(theta)
+    fixed = fixed_by_user(base, settings.fixed)
+    keep = np.array([name not in fixed for name in space.names])
+    result: dict[str, dict[str, Any]] = {}
+    for name, effect in effect_objs.items():
+        model = augmented_pipeline(base, [effect], settings.duration_s, fixed)
+        points: list[dict[str, Any]] = []
+        paths = effect_paths(effect.parameter_space)
+        for moved, held in paths:
+            fractions = FRACTIONS if len(paths) == 1 else SIGNED_FRACTIONS
+            points += _probe_path(probe, model, space, effect.parameter_space, (moved, held), fractions, rounds,
+                                  goal, RefitState(jac.copy(), u0.copy(), emb0), (u0, d0), seeds, keep)  # fmt: skip
+        points.sort(key=lambda p: p["distance"])
+        result[name] = {"starts": points, "baseline_distance": d0}
+        best = points[0] if points else None
+        if best is not None:
+            shown = ", ".join(f"{k} {v:.3g}" for k, v in best["params"].items())
+            say(f"      {name}: closest ridge point {shown} (distance {best['distance']:.4g}; θ̂ {d0:.4g})")
+    return result
+
+
 def ridge_starts(
     settings: DiagnoseSettings,
     base: Pipeline,
@@ -197,9 +238,7 @@ def ridge_starts(
         say: Progress lines.
         pool: The diagnosis' workers (each clip a job when it has two or more).
     """
-    from physinfer.discrepancy.candidates import augmented_pipeline
     from physinfer.discrepancy.clip_jobs import pooled_probes
-    from physinfer.session import fixed_by_user
 
     if not effect_objs:
         return {}
@@ -217,28 +256,14 @@ def ridge_starts(
             return stored["effects"]
     say(f"      ridge starts: {len(effect_objs)} effect(s) switched on along their range, the base refit to the video")
     pooled = pooled_probes(pool, base, render_params)
-    probe = pooled(False) if pooled is not None else Probe(base, render_params)
-    goal = np.asarray(target_embedding, dtype=np.float64)
-    emb0, _ = probe.clips(base, [theta] * len(seeds), seeds)
-    jac, _ = jacobian(probe, theta, emb0, seeds, JACOBIAN_STEP)
-    d0 = _distance(goal, emb0)
-    u0 = space.to_unit(theta)
-    fixed = fixed_by_user(base, settings.fixed)
-    keep = np.array([name not in fixed for name in space.names])
-    result: dict[str, dict[str, Any]] = {}
-    for name, effect in effect_objs.items():
-        model = augmented_pipeline(base, [effect], settings.duration_s, fixed)
-        points: list[dict[str, Any]] = []
-        paths = effect_paths(effect.parameter_space)
-        for moved, held in paths:
-            fractions = FRACTIONS if len(paths) == 1 else SIGNED_FRACTIONS
-            points += _probe_path(probe, model, space, effect.parameter_space, (moved, held), fractions, rounds,
-                                  goal, RefitState(jac.copy(), u0.copy(), emb0), (u0, d0), seeds, keep)  # fmt: skip
-        points.sort(key=lambda p: p["distance"])
-        result[name] = {"starts": points, "baseline_distance": d0}
-        best = points[0] if points else None
-        if best is not None:
-            shown = ", ".join(f"{k} {v:.3g}" for k, v in best["params"].items())
-            say(f"      {name}: closest ridge point {shown} (distance {best['distance']:.4g}; θ̂ {d0:.4g})")
-    atomic_write_json(path, {"key": key, "effects": result, "simulations": probe.simulations, "floor": floor})
+    probe: Probe = Probe(base, render_params)
+    try:
+        result = _probe_all(settings, base, theta, target_embedding, rounds, effect_objs, seeds, pooled(False)
+                            if pooled is not None else probe, say)  # fmt: skip
+    except Exception as exc:  # noqa: BLE001 - a worker that cannot run a clip: the same clips here
+        if pooled is None:
+            raise
+        say(f"      the ridge probe failed on a worker ({type(exc).__name__}: {exc}); running it here")
+        result = _probe_all(settings, base, theta, target_embedding, rounds, effect_objs, seeds, probe, say)
+    atomic_write_json(path, {"key": key, "effects": result, "floor": floor})
     return json.loads(path.read_text())["effects"]
