@@ -134,7 +134,7 @@ def diagnose_cmd(
         typer.Option(
             "--check-limits",
             help="Check each effect not named: run this diagnosis' own stages on a target made with it at its "
-            "stated limit (doubled once if not named there), so the limit is what this search names. Costly.",
+            "stated limit (doubled until named, to the end of its range), so the limit is what this search names. Costly.",
         ),
     ] = False,
     screen: Annotated[

@@ -13,10 +13,10 @@ effect switched on at the stated limit, and the diagnosis' own stages run on it 
 baseline from the centre (``steps``), its control (``effect_steps`` from its fit), the
 effect's ridge probe and its model's search (``effect_steps``), each gap from the same ``K``
 re-simulation seeds — and decided by the diagnosis' rule at the null scale its limits
-assume. Named: the limit stands, checked. Not named: the strength is doubled (up to the
-far end of the range) and checked once more; the first strength named is the limit, and
-where none is, the limit is ``None``: the local refit says the effect is visible from
-there, but this diagnosis' search does not reach it from the starts it makes.
+assume. Named: the limit stands, checked. Not named: the strength is doubled and checked
+again, up to the far end of the range (at most :data:`MAX_CHECKS` strengths); the first
+strength named is the limit, and where none is, the limit is ``None``: the local refit says
+the effect is visible, but this diagnosis' search does not name it anywhere in its range.
 
 Each check is a small diagnosis of its own under ``limit-check/<effect>-<fraction>/``
 (resumable); ``limit_check.json`` holds the records. It costs about one baseline, one
@@ -58,6 +58,8 @@ Log = Callable[[str], None]
 CHECK_FILE = "limit_check.json"
 #: The checks' optimizer seeds are the diagnosis seed plus this (never a stage's own).
 SEED_OFFSET = 104729
+#: Strengths checked at most: the stated limit, then doubled until named or at the far end.
+MAX_CHECKS = 5
 
 
 def check_one(
@@ -143,7 +145,7 @@ def check_limits(
     ``limit_check.json``): effect name → ``checks`` (one record per strength tried),
     ``detectable_from`` (the first strength named, or ``None``), ``local`` (the ladder's)
     and ``reason`` (where none was named)."""
-    key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": scale, "steps": steps,
+    key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": scale, "steps": steps, "checks": MAX_CHECKS,
            "effect_steps": effect_steps, "seeds": list(seeds), "ridge": settings.ridge_starts,
            "limits": {n: limits[n].get("fraction") for n in sorted(limits)}}  # fmt: skip
     path = settings.out / CHECK_FILE
@@ -157,7 +159,8 @@ def check_limits(
         if name == named or fraction is None or not np.isfinite(fraction) or name not in effect_objs:
             continue
         tried: list[dict[str, Any]] = []
-        for f in dict.fromkeys([min(1.0, float(fraction)), min(1.0, 2.0 * float(fraction))]):
+        ladder = [min(1.0, float(fraction) * 2.0**i) for i in range(MAX_CHECKS)]
+        for f in dict.fromkeys(ladder[: next((i + 1 for i, v in enumerate(ladder) if v >= 1.0), MAX_CHECKS)]):
             say(f"      checking {name}'s limit: this diagnosis' stages on a target with it at {f:.3g} of its range")
             record = check_one(registry, settings, base, target, theta, name, effect_objs[name], f, scale,
                                n_candidates, steps, effect_steps, seeds)  # fmt: skip
@@ -170,7 +173,7 @@ def check_limits(
         if found is None:
             where = " and ".join(", ".join(f"{k} = {v:.3g}" for k, v in r["values"].items()) for r in tried)
             reason = (f"the local refit puts it within reach, but this diagnosis' search did not name it at {where}: "
-                      "reachable only from a start the diagnosis does not make")  # fmt: skip
+                      "reachable only from a start the diagnosis does not make, or not at this null scale")  # fmt: skip
         result[name] = {"checks": tried, "detectable_from": None if found is None else found["values"],
                         "fraction": None if found is None else found["fraction"], "local": local,
                         "reason": reason}  # fmt: skip
