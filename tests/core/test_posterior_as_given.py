@@ -315,3 +315,12 @@ def test_a_constant_input_is_held_at_its_exact_training_value_not_a_rounded_one(
     assert stats["constant"] == [2]
     x, _ = check_inputs(stats, np.array([0.0, 0.0, 0.1234567891], dtype=np.float32))
     assert x[2] == x_train[0, 2]  # bit for bit
+
+
+def test_a_nuisance_parameter_that_misses_is_reported_but_does_not_refuse_the_estimator():
+    rng = np.random.default_rng(6)
+    theta = rng.uniform(-0.8, 0.8, size=(100, 2))
+    samples = theta[None] + 0.01 * rng.normal(size=(300, 100, 2))
+    samples[..., 1] += 0.5  # the phase's intervals miss
+    check = held_out_check(theta, samples, ["length", "phase"], nuisance=["phase"])
+    assert check["problems"] == [] and check["nuisance_problems"][0].startswith("phase: its 90 % interval")

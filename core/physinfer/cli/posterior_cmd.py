@@ -159,6 +159,7 @@ def held_out_lines(held_out: dict | None) -> list[str]:
             f"median width {row['median_width90']:.0%} of the range"
         )
     lines += [f"  FAILED: {p}" for p in held_out["problems"]]
+    lines += [f"  nuisance (not refused): {p}" for p in held_out.get("nuisance_problems", [])]
     return lines
 
 

@@ -25,17 +25,22 @@ LEVEL = 0.9
 MIN_WIDTH = 0.005
 
 
-def held_out_check(theta_unit: np.ndarray, samples_unit: np.ndarray, names: Sequence[str]) -> dict[str, Any]:
+def held_out_check(
+    theta_unit: np.ndarray, samples_unit: np.ndarray, names: Sequence[str], nuisance: Sequence[str] = ()
+) -> dict[str, Any]:
     """Coverage and widths of the 90 % intervals on held-out clips.
 
     Args:
         theta_unit: ``(N, D)`` the clips' true θ, normalised to ``[-1, 1]``.
         samples_unit: ``(S, N, D)`` posterior samples for each clip.
         names: ``(D,)`` parameter names.
+        nuisance: Names of nuisance parameters (a pendulum's phase): reported, never
+            measured, so their failures are ``nuisance_problems``, not ``problems``.
 
     Returns:
         ``{clips, parameters: {name: {coverage90, median_width90 (share of the range),
-        points (share of posteriors narrower than MIN_WIDTH)}}, problems: [str]}``.
+        points (share of posteriors narrower than MIN_WIDTH)}}, problems: [str],
+        nuisance_problems: [str]}``.
     """
     lo = np.quantile(samples_unit, 0.05, axis=0)
     hi = np.quantile(samples_unit, 0.95, axis=0)
@@ -45,7 +50,9 @@ def held_out_check(theta_unit: np.ndarray, samples_unit: np.ndarray, names: Sequ
     need = LEVEL - 3.0 * np.sqrt(LEVEL * (1 - LEVEL) / max(n, 1))
     parameters: dict[str, Any] = {}
     problems: list[str] = []
+    nuisance_problems: list[str] = []
     for i, name in enumerate(names):
+        found = nuisance_problems if name in nuisance else problems
         row = {
             "coverage90": round(float(covered[:, i].mean()), 3),
             "median_width90": round(float(np.median(width[:, i])), 4),
@@ -53,12 +60,18 @@ def held_out_check(theta_unit: np.ndarray, samples_unit: np.ndarray, names: Sequ
         }
         parameters[name] = row
         if row["points"] > 0.5:
-            problems.append(
+            found.append(
                 f"{name}: the posterior collapsed to a point on {row['points']:.0%} of the held-out clips"
             )
         elif row["coverage90"] < need:
-            problems.append(
+            found.append(
                 f"{name}: its 90 % interval held the truth on {row['coverage90']:.0%} of {n} held-out clips "
                 f"(at least {need:.0%} expected)"
             )
-    return {"clips": n, "required_coverage90": round(float(need), 3), "parameters": parameters, "problems": problems}
+    return {
+        "clips": n,
+        "required_coverage90": round(float(need), 3),
+        "parameters": parameters,
+        "problems": problems,
+        "nuisance_problems": nuisance_problems,
+    }

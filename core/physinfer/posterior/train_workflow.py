@@ -161,7 +161,7 @@ def train_posterior(
     if scene is not None:  # the clips' scene: targets of another one get no intervals from it
         estimator.config = replace(estimator.config, scene=dict(scene))
     t2 = time.perf_counter()
-    held_out = _check_held_out(estimator, data, split, emb, embedder_info, path, progress)
+    held_out = _check_held_out(estimator, data, split, emb, embedder_info, path, pipeline.phenomenon, progress)
     estimator.config = replace(estimator.config, held_out=held_out)
     if held_out and held_out["problems"] and not accept_miscalibrated:
         raise UserInputError(_refusal(held_out, data, as_given))
@@ -208,6 +208,7 @@ def _check_held_out(
     embedder: Any,
     embedder_info: dict[str, Any],
     path: TargetPath | None,
+    phenomenon: Any,
     progress: ProgressFn,
 ) -> dict[str, Any] | None:
     """The held-out check on the dataset's ``test`` (else ``val``) split, or ``None`` when
@@ -225,7 +226,9 @@ def _check_held_out(
     rows = slice(0, min(len(pairs), MAX_CLIPS))
     x = np.stack([estimator.input_check(row)[0] for row in pairs.conditions[rows]])
     samples = estimator.sample_unit_batched(x, SAMPLES, seed=0)
-    check = held_out_check(pairs.theta_unit[rows].astype(np.float64), samples, estimator.parameter_space.names)
+    names = estimator.parameter_space.names
+    nuisance = getattr(phenomenon, "nuisance", ()) or ()
+    check = held_out_check(pairs.theta_unit[rows].astype(np.float64), samples, names, nuisance)
     return {"split": held, "as_given": path is not None, **check}
 
 
