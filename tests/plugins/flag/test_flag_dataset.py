@@ -32,7 +32,7 @@ def test_flag_dataset_generate_small(tmp_path):
             assert low <= row["params"][spec.name] <= high, spec.name
         assert abs(row["render_params"]["camera_azimuth_deg"]) <= 15.0
     train = ClipDataset(out, "train")
-    assert train[0].shape == (8, 48, 48) and len(train.simulations()) == 2
+    assert train[0].shape == (8, 48, 48, 3) and len(train.simulations()) == 2  # colour: as videos arrive
     assert np.ptp(train.clips([0, 1]).astype(float)) > 0
 
     again = subprocess.run(args, capture_output=True, text=True, timeout=900)
