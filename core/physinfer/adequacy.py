@@ -21,8 +21,6 @@ targets (written to mp4, refined with defaults) is measured by ``benchmarks/benc
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -47,16 +45,12 @@ METHOD = (
 
 
 def camera_round_trip(clip: Clip, *, crf: int = CODEC_CRF, sigma: float = NOISE_SIGMA, seed: int = 0) -> Clip:
-    """``clip`` with sensor noise, written as H.264 at ``crf`` and read back."""
-    from physinfer.video import read_video, write_video
+    """``clip`` with sensor noise, written as H.264 at ``crf`` and read back
+    (:func:`physinfer.as_given.camera` without white balance or blur)."""
+    from physinfer.as_given import camera
 
-    rng = np.random.default_rng(seed)
-    noisy = np.clip(clip.frames.astype(np.float32) + rng.normal(0.0, sigma, clip.frames.shape), 0, 255)
-    with tempfile.TemporaryDirectory(prefix="physinfer-codec-") as folder:
-        path = write_video(Path(folder) / "round_trip.mp4", noisy.astype(np.uint8), clip.fps, crf=crf)
-        back = read_video(path)
-    frames = back.frames[: clip.n_frames, : clip.frames.shape[1], : clip.frames.shape[2]]
-    return Clip(frames, clip.fps)
+    effects = {"crf": crf, "noise": sigma, "gain": np.ones(3), "blur": 0.0}
+    return camera(clip, effects, np.random.default_rng(seed))
 
 
 def round_trip_distance(embedder: Any, clip: Clip, seed: int) -> float:

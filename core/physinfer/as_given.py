@@ -100,15 +100,12 @@ def as_given(
     embedder: Any,
     model: CameraModel,
     rng: np.random.Generator,
-) -> tuple[Clip, bool]:
+) -> Clip:
     """``clip`` as ``infer`` would see it had a user filmed it: :func:`camera`, then the
     conditioning ``infer`` applies to a user's file (framing or the still-background freeze;
-    no ζ estimate, as ``infer`` makes none).
-
-    Returns:
-        ``(clip, conditioned)``: ``conditioned`` is ``False`` when the conditioning refuses
-        the clip (e.g. two things move) — as it would refuse such a target — and the clip is
-        then returned through the camera only.
+    no ζ estimate, as ``infer`` makes none). A clip the conditioning refuses (e.g. two things
+    move) — as it would refuse such a target, whose posterior is then never asked for — is
+    returned through the camera only.
     """
     from physinfer.conditioning import Conditioning, condition_target
 
@@ -118,5 +115,5 @@ def as_given(
             phenomenon, embedder, filmed, Conditioning(estimate_render=False), {}
         )
     except UserInputError:
-        return filmed, False
-    return conditioned, True
+        return filmed
+    return conditioned

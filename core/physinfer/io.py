@@ -131,6 +131,17 @@ def atomic_write_json(path: str | Path, obj: Any) -> None:
     atomic_write_text(path, json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n")
 
 
+def read_keyed_json(path: str | Path, key: Any) -> dict[str, Any] | None:
+    """The JSON object a resumable stage wrote to ``path`` (``{"key": key, ...}``, by
+    :func:`atomic_write_json`) when it was written for this ``key``; ``None`` when there is
+    no such file or it was written for another key (the stage then runs again)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    stored = json.loads(path.read_text())
+    return stored if stored.get("key") == key else None
+
+
 def atomic_save_npz(path: str | Path, **arrays: Any) -> None:
     """Save arrays to an ``.npz`` atomically (object arrays are refused)."""
     for name, arr in arrays.items():

@@ -15,7 +15,7 @@ import numpy as np
 
 from physinfer.errors import SimulationFailed
 from physinfer.evaluation import ClipEmbedder, Pipeline, evaluate, squared_distance
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
 
@@ -120,10 +120,8 @@ def select_best(
     seeds = noise_seeds(config.seed, config.select_seeds, salt=SELECTION_SEED_SALT)
     key = {"steps": [r.step for r in finalists], "seeds": seeds}
     path = run_dir.path / SELECTION_FILE
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored
+    if (stored := read_keyed_json(path, key)) is not None:
+        return stored
     t0 = time.perf_counter()
     fresh_by_step = _fresh_distances(finalists, seeds, pipeline, target, target_embedding, embed_clips)
     rows = []

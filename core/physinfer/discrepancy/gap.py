@@ -14,14 +14,13 @@ embeddings are kept beside it (NPZ), for the detection limits' ladder to reuse
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.io import atomic_save_npz, atomic_write_json
+from physinfer.io import atomic_save_npz, atomic_write_json, read_keyed_json
 from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
@@ -81,10 +80,8 @@ def measure_gap(
     key = {"params": {k: float(v) for k, v in params.items()}, "seeds": [int(s) for s in seeds]}
     path = None if cache_dir is None else Path(cache_dir) / cache_name
     npz = None if path is None else path.with_suffix(".npz")
-    if path is not None and path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return _from_summary(params, stored["summary"], npz)
+    if path is not None and (stored := read_keyed_json(path, key)) is not None:
+        return _from_summary(params, stored["summary"], npz)
     floor = measure_noise_floor(
         pipeline, params, render_params, seeds=seeds, target_embedding=target_embedding, embed_clips=embed_clips
     )

@@ -43,7 +43,7 @@ from physinfer.discrepancy.stages import (
     effect_stage,
     run_stage,
 )
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import noise_seeds
 from physinfer.session import fixed_by_user
 
@@ -149,10 +149,8 @@ def check_limits(
            "effect_steps": effect_steps, "seeds": list(seeds), "ridge": settings.ridge_starts,
            "limits": {n: limits[n].get("fraction") for n in sorted(limits)}}  # fmt: skip
     path = settings.out / CHECK_FILE
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored["effects"]
+    if (stored := read_keyed_json(path, key)) is not None:
+        return stored["effects"]
     result: dict[str, dict[str, Any]] = {}
     for name, limit in limits.items():
         fraction = limit.get("fraction")

@@ -11,7 +11,7 @@ import numpy as np
 from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.stages import Stage
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.loop import Pipeline, RefineResult
 from physinfer.noise import noise_seeds
 from physinfer.registry import Registry
@@ -91,10 +91,8 @@ def run_limits(
         **({"n_candidates": n_candidates} if n_candidates is not None else {}),
     }
     path = settings.out / "limits.json"
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored["limits"]
+    if (stored := read_keyed_json(path, key)) is not None:
+        return stored["limits"]
     embeddings = np.asarray(before.gap.embeddings)
     if embeddings.ndim != 2 or len(embeddings) < 2:  # a gap measured before embeddings were kept
         seeds = noise_seeds(settings.seed + 2, settings.floor_samples)

@@ -37,7 +37,7 @@ import numpy as np
 from physinfer.discrepancy.ladder import Probe, strength_path, values_at
 from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
 from physinfer.discrepancy.starts import RIDGE_FILE
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.loop import squared_distance
 from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
@@ -250,10 +250,8 @@ def ridge_starts(
            "signed_fractions": list(SIGNED_FRACTIONS), "multipliers": list(MULTIPLIERS), "polish": POLISH,
            "rounds": rounds}  # fmt: skip
     path = settings.out / RIDGE_FILE
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored["effects"]
+    if (stored := read_keyed_json(path, key)) is not None:
+        return stored["effects"]
     say(f"      ridge starts: {len(effect_objs)} effect(s) switched on along their range, the base refit to the video")
     pooled = pooled_probes(pool, base, render_params)
     probe: Probe = Probe(base, render_params)

@@ -51,7 +51,7 @@ from physinfer.discrepancy.ladder import (
     run_ladder,
 )
 from physinfer.discrepancy.limit_rule import Threshold
-from physinfer.io import atomic_write_json
+from physinfer.io import atomic_write_json, read_keyed_json
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
@@ -135,10 +135,8 @@ def screen_effects(
            "seeds": list(seeds), "rule": dataclasses.asdict(settings.rule), "floor_samples": settings.floor_samples,
            "candidates": counted}  # fmt: skip
     path = settings.out / SCREEN_FILE
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if stored.get("key") == key:
-            return stored["effects"]
+    if (stored := read_keyed_json(path, key)) is not None:
+        return stored["effects"]
     say(f"      screening {len(effect_objs)} candidates: each effect's signature at the baseline's fit")
     # The strongest rung first: an effect whose top clears its threshold is refined, and only
     # the others' weaker rungs (whose own noise, and so threshold, may be smaller) are simulated.

@@ -132,8 +132,10 @@ def evaluate_calibration(
             on_progress=lambda done, total, label=label: progress(f"embedding {label}", done, total),
         )  # fmt: skip
         t1 = time.perf_counter()
-        report = _calibrate_pairs(estimator, pairs, n_samples, seed, progress)
-        report.estimator, report.data, report.split, report.targets = estimator_path, Path(data), split, label
+        report = _calibrate_pairs(
+            estimator, pairs, n_samples, seed, progress,
+            {"estimator": estimator_path, "data": Path(data), "split": split, "targets": label},
+        )  # fmt: skip
         report.seconds = {"load": t0 - t_start, "embed": t1 - t0, "calibrate": time.perf_counter() - t1}
         reports.append(report)
     report, report.in_memory = reports
@@ -157,16 +159,18 @@ def _target_path(estimator: Any, phenomenon: Any) -> TargetPath:
 
 
 def _calibrate_pairs(
-    estimator: Any, pairs: Any, n_samples: int, seed: int, progress: ProgressFn
+    estimator: Any, pairs: Any, n_samples: int, seed: int, progress: ProgressFn, where: dict[str, Any]
 ) -> CalibrationReport:
-    """Ranks, coverage, median errors and contraction of ``estimator`` on embedded ``pairs``."""
+    """Ranks, coverage, median errors and contraction of ``estimator`` on embedded ``pairs``;
+    ``where``: the report's ``estimator`` (path), ``data``, ``split`` and ``targets``."""
     from physinfer.posterior.calibration import calibrate
+    from physinfer.posterior.inputs import checked_rows
     from physinfer.posterior.summary import PRIOR_VARIANCE
 
     names = estimator.parameter_space.names
     medians = np.empty_like(pairs.theta_unit, dtype=np.float64)
     variances = np.empty_like(medians)
-    inputs = np.stack([estimator.input_check(row)[0] for row in pairs.conditions])
+    inputs = checked_rows(estimator.config.inputs, pairs.conditions)
 
     def sampler(xs: np.ndarray, n: int, batch_seed: int) -> np.ndarray:
         return estimator.sample_unit_batched(xs, n, seed=batch_seed)
@@ -185,9 +189,7 @@ def _calibrate_pairs(
     med_phys = np.stack([spec.from_unit(medians[:, i]) for i, spec in enumerate(space)], axis=1)
     return CalibrationReport(
         calibration=cal,
-        estimator=Path("."),
-        data=Path("."),
-        split="",
+        **where,
         median_abs_error={
             n: float(np.median(np.abs(med_phys[:, i] - truth[:, i]))) for i, n in enumerate(names)
         },

@@ -246,7 +246,7 @@ def _embed_range(
                 embedder=embedder,
                 model=as_given.camera,
                 rng=np.random.default_rng([as_given.seed, SPLIT_CODES.get(split, 3), start + k]),
-            )[0]
+            )
             for k, clip in enumerate(clips)
         ]
     x = np.asarray(embedder.embed_many(clips), dtype=np.float32)

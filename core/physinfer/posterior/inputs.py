@@ -83,3 +83,8 @@ def check_inputs(stats: dict[str, Any] | None, x: np.ndarray) -> tuple[np.ndarra
         "extrapolating": share > MAX_OUTSIDE_SHARE,
     }
     return x, record
+
+
+def checked_rows(stats: dict[str, Any] | None, xs: np.ndarray) -> np.ndarray:
+    """``(B, D)`` the inputs ``xs`` after :func:`check_inputs`, row by row (held-out sets)."""
+    return np.stack([check_inputs(stats, row)[0] for row in np.asarray(xs)])

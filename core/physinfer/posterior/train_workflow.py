@@ -215,6 +215,7 @@ def _check_held_out(
     it has no held-out clips."""
     from physinfer.datasets.loader import ClipDataset
     from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
+    from physinfer.posterior.inputs import checked_rows
 
     held = next((s for s in ("test", "val") if s != split and len(ClipDataset(data, s)) > 0), None)
     if held is None:
@@ -224,7 +225,7 @@ def _check_held_out(
         on_progress=lambda done, total: progress("held-out clips", done, total),
     )  # fmt: skip
     rows = slice(0, min(len(pairs), MAX_CLIPS))
-    x = np.stack([estimator.input_check(row)[0] for row in pairs.conditions[rows]])
+    x = checked_rows(estimator.config.inputs, pairs.conditions[rows])
     samples = estimator.sample_unit_batched(x, SAMPLES, seed=0)
     names = estimator.parameter_space.names
     nuisance = getattr(phenomenon, "nuisance", ()) or ()
