@@ -5,7 +5,8 @@ One code path serves every executor: a :class:`concurrent.futures.Executor` (see
 unit, in a bounded window, and this process writes each unit's record as it completes.
 Re-running on the same directory resumes (:mod:`physinfer.datasets.resume`): units whose
 record and files are intact are skipped, damaged ones are generated again. The executor
-and resume names are re-exported here.
+and resume names (:class:`GenerateProgress` included, defined with the resume that
+reports its first phase) are re-exported here.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections.abc import Mapping
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 from physinfer.datasets.executors import (
     ExecutorInfo,
@@ -28,6 +29,7 @@ from physinfer.datasets.generator import DatasetGenerator
 from physinfer.datasets.plan import UnitPlan, plan_dataset
 from physinfer.datasets.presets import SPLITS, DatasetPreset
 from physinfer.datasets.resume import (
+    GenerateProgress,
     check_directory,
     dataset_config,
     finish_dataset,
@@ -49,16 +51,6 @@ __all__ = [
     "ExecutorInfo", "GenerateProgress", "GenerateResult", "InlineExecutor", "dataset_config", "default_workers",
     "generate_dataset", "open_executor",
 ]
-
-
-class GenerateProgress(Protocol):
-    """Receives progress: a phase starts with a total, then advances."""
-
-    def start(self, phase: str, total: int, done: int = 0) -> None:
-        """Phase ``"verify"`` (in units) or ``"generate"`` (in renders) begins."""
-
-    def advance(self, n: int) -> None:
-        """``n`` more units verified or renders written."""
 
 
 @dataclass

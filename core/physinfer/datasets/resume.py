@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from physinfer.datasets.generator import DatasetGenerator
 from physinfer.datasets.plan import UnitPlan
@@ -29,8 +29,15 @@ from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.locking import LOCK_FILE
 
-if TYPE_CHECKING:
-    from physinfer.datasets.engine import GenerateProgress
+
+class GenerateProgress(Protocol):
+    """Receives progress: a phase starts with a total, then advances."""
+
+    def start(self, phase: str, total: int, done: int = 0) -> None:
+        """Phase ``"verify"`` (in units) or ``"generate"`` (in renders) begins."""
+
+    def advance(self, n: int) -> None:
+        """``n`` more units verified or renders written."""
 
 
 def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int) -> dict[str, Any]:
