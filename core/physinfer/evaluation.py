@@ -11,15 +11,25 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from physinfer.roles import Effect, Embedder, Phenomenon, Renderer, Simulator
 from physinfer.types import Clip, Trajectory
 
-if TYPE_CHECKING:
-    from physinfer.trial_workers import TrialWorkers
+
+class ClipWorkers(Protocol):
+    """Simulates and renders a step's jobs elsewhere (:class:`~physinfer.trial_workers.TrialWorkers`)."""
+
+    def clips(
+        self,
+        params: Sequence[Mapping[str, float]],
+        seeds: Sequence[int],
+        render_params: Mapping[str, Any],
+    ) -> list[tuple[Clip | None, str | None, dict[str, float]]]:
+        """Job ``j`` = ``(params[j], seeds[j])`` as :func:`make_clips` makes it here; in order."""
+        ...
 
 
 @dataclass
@@ -27,7 +37,8 @@ class Pipeline:
     """The built roles of one phenomenon for one run.
 
     ``workers``, when set, simulates and renders the trials of each step on an executor
-    (:class:`~physinfer.trial_workers.TrialWorkers`) instead of in this process.
+    (:class:`ClipWorkers`, attached by :func:`physinfer.trial_workers.trial_workers`)
+    instead of in this process.
     """
 
     phenomenon: Phenomenon
@@ -35,7 +46,7 @@ class Pipeline:
     renderer: Renderer
     embedder: Embedder
     effects: Sequence[Effect] = ()
-    workers: TrialWorkers | None = None
+    workers: ClipWorkers | None = None
 
 
 def squared_distance(a: np.ndarray, b: np.ndarray) -> float:
