@@ -9,19 +9,16 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from physinfer.errors import SimulationFailed
 from physinfer.evaluation import ClipEmbedder, Pipeline, evaluate, squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
+from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
-
-if TYPE_CHECKING:
-    from physinfer.loop import RefineConfig, RefineResult
-
 
 #: Salt of the selection's seeds, so they repeat neither the trials' nor the noise floor's.
 SELECTION_SEED_SALT = 0x5E1EC7

@@ -17,8 +17,9 @@ import numpy as np
 from physinfer.adequacy import assess_fit
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
+from physinfer.evaluation import Pipeline
 from physinfer.locking import exclusive_directory
-from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement, write_outputs
+from physinfer.loop import run_refinement, write_outputs
 from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's historical API
     EffectParameterError,
     build_pipeline,
@@ -29,6 +30,7 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     naming_effects,
     target_duration,
 )
+from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord

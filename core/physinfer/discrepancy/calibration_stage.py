@@ -12,7 +12,7 @@ from physinfer.discrepancy.needed_calibration import CalibrationRun, next_to_ref
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, stage_jobs
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.stages import calibration_run
-from physinfer.loop import Pipeline
+from physinfer.evaluation import Pipeline
 from physinfer.progress import StageProgress
 from physinfer.roles import Target
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from physinfer.evaluation import Pipeline
 from physinfer.fixed import FixedParameters
-from physinfer.loop import Pipeline
 from physinfer.parameters import ParameterSpace
 from physinfer.roles import Effect
 from physinfer.session import make_simulator

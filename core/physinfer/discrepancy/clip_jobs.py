@@ -32,8 +32,7 @@ if TYPE_CHECKING:
     from physinfer.discrepancy.limits import ProbeFactory
     from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
-    from physinfer.evaluation import ClipEmbedder
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import ClipEmbedder, Pipeline
 
 Log = Callable[[str], None]
 T = TypeVar("T")

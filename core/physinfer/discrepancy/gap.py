@@ -24,8 +24,7 @@ from physinfer.io import atomic_save_npz, atomic_write_json, read_keyed_json
 from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
-    from physinfer.evaluation import ClipEmbedder
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import ClipEmbedder, Pipeline
 
 GAP_FILE = "gap.json"
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.loop import Pipeline, simulate_many, squared_distance
+from physinfer.evaluation import Pipeline, simulate_many, squared_distance
 from physinfer.parameters import ParameterSpace
 
 

@@ -49,7 +49,7 @@ from physinfer.session import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.workflow import DiagnoseSettings
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import Pipeline
     from physinfer.registry import Registry
     from physinfer.roles import Target
 

@@ -11,9 +11,10 @@ import numpy as np
 from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.stages import Stage
+from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.loop import Pipeline, RefineResult
 from physinfer.noise import noise_seeds
+from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.session import fixed_by_user

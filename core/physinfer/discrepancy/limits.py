@@ -67,7 +67,7 @@ from physinfer.discrepancy.limit_rule import (
 from physinfer.discrepancy.limit_text import limit_line, reveal_phrase, summary_phrase
 from physinfer.discrepancy.refit import jacobian
 from physinfer.discrepancy.reveal import reveal_by_fixing, reveal_by_setting
-from physinfer.loop import Pipeline
+from physinfer.evaluation import Pipeline
 from physinfer.parameters import ParameterSpace
 
 __all__ = [

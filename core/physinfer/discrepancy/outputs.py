@@ -11,8 +11,8 @@ import numpy as np
 from physinfer.discrepancy.gap import gap_numbers
 from physinfer.discrepancy.localise import localise
 from physinfer.discrepancy.stages import Stage, clip_of
-from physinfer.loop import RefineResult
 from physinfer.noise import NoiseFloor
+from physinfer.refinement import RefineResult
 from physinfer.roles import Target
 from physinfer.scene import scene_of
 from physinfer.session import fixed_by_user, full_parameter_space, optional_settings

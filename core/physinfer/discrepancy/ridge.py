@@ -37,15 +37,15 @@ import numpy as np
 from physinfer.discrepancy.ladder import Probe, strength_path, values_at
 from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
 from physinfer.discrepancy.starts import RIDGE_FILE
+from physinfer.evaluation import squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.loop import squared_distance
 from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.workflow import DiagnoseSettings
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import Pipeline
 
 Log = Callable[[str], None]
 

@@ -22,8 +22,10 @@ from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
-from physinfer.loop import Pipeline, RefineConfig, RefineResult, run_refinement
+from physinfer.evaluation import Pipeline
+from physinfer.loop import run_refinement
 from physinfer.noise import NoiseFloor, noise_seeds
+from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Effect, Target
 from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord

@@ -70,14 +70,15 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
 )
 from physinfer.discrepancy.unnamed import closest_unnamed, stage_end
 from physinfer.errors import UserInputError
+from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
-from physinfer.loop import Pipeline, RefineConfig
 from physinfer.noise import noise_seeds
 from physinfer.outputs import OutputFolder
 from physinfer.parameters import refuse_repeats
 from physinfer.pipeline import load_target, target_duration
 from physinfer.progress import StageProgress
+from physinfer.refinement import RefineConfig
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.scene import scene_of
