@@ -8,6 +8,7 @@ one (30 frames at 25 fps, which the short default clips cover).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from functools import cache
 from typing import Any
@@ -32,16 +33,28 @@ SCENE_SETTINGS = (
 
 
 def make_simulator(  # noqa: ANN201 - HangingClothSimulator
-    effects: Sequence[Effect] = (), *, scene: Mapping[str, Any] | None = None
+    effects: Sequence[Effect] = (), *, duration_s: float | None = None, scene: Mapping[str, Any] | None = None
 ):
-    """The hanging-cloth simulator at its default configuration (fan W2), or a scene's
-    (complete settings of :data:`SCENE_SETTINGS`; the grid keeps its 4 cm spacing)."""
+    """The hanging-cloth simulator at its default configuration (fan W2), or a scene's.
+
+    Args:
+        effects: Effects (the hanging cloth has none; any is refused).
+        duration_s: Record this many seconds after the warm-up (rounded up to whole frames)
+            instead of the default 32 frames: ``dataset generate``'s 60-frame clips and
+            ``simulate --duration`` ask for it.
+        scene: Complete settings of :data:`SCENE_SETTINGS` (the grid keeps its 4 cm spacing);
+            ``None``: the default fabric at fan W2.
+    """
+    from physinfer_hanging_cloth.simulator import HangingClothConfig
     from physinfer_hanging_cloth.simulator import make_simulator as make
 
-    if scene is None:
-        return make(effects)
-    return make(effects, width=float(scene["cloth_width"]), height=float(scene["cloth_height"]),
-                fan_level=str(scene["fan"]))
+    config: dict[str, Any] = {}
+    if scene is not None:
+        config = {"width": float(scene["cloth_width"]), "height": float(scene["cloth_height"]),
+                  "fan_level": str(scene["fan"])}
+    if duration_s is not None:
+        config["n_frames"] = max(2, math.ceil(duration_s * HangingClothConfig().fps - 1e-9))
+    return make(effects, **config)
 
 
 def make_renderer():  # noqa: ANN201 - HangingClothRenderer

@@ -22,3 +22,14 @@ def test_contract_and_default_target(physinfer_registry):
     target = phenomenon.default_target()
     assert target.truth == DEFAULT_TRUTH
     assert target.clip.n_frames >= embedder.n_frames
+
+
+def test_records_as_long_as_a_dataset_or_simulate_asks(physinfer_registry):
+    """``dataset generate`` with its default 60-frame clips asks the simulator for 2.4 s; the
+    default clip stays 32 frames (the embedded target and Bouman's protocol)."""
+    phenomenon = physinfer_registry.phenomenon("hanging_cloth")
+    assert phenomenon.make_simulator().config.n_frames == 32
+    assert phenomenon.make_simulator(duration_s=60 / 25).config.n_frames == 60
+    scene = {"cloth_width": 0.5, "cloth_height": 0.7, "fan": "W3"}
+    config = phenomenon.make_simulator(duration_s=3.0, scene=scene).config
+    assert (config.n_frames, config.width, config.height, config.fan_level) == (75, 0.5, 0.7, "W3")
