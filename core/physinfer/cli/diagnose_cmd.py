@@ -29,199 +29,253 @@ from physinfer.cli.app import (
     err_console,
     handle_errors,
 )
+from physinfer.cli.options import (
+    EmbedderOpt,
+    FpsOpt,
+    OptimizerOpt,
+    RenderSetOpt,
+    TorchDeviceOpt,
+    WeightsOpt,
+)
+
+# The options only ``diagnose`` has, declared here so its signature reads as a list of settings.
+_TargetOpt = Annotated[
+    Path | None, typer.Option("--target", help="Video to diagnose; default: the plugin's embedded target.")
+]
+_TruthOpt = Annotated[list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported only).")]
+_StepsOpt = Annotated[int | None, typer.Option("--steps", help="Baseline trials (default: the plugin's).")]
+_EffectStepsOpt = Annotated[
+    int | None, typer.Option("--effect-steps", help="Trials per augmented model and for the control (default: --steps).")
+]
+_EffectOpt = Annotated[
+    list[str], typer.Option("--effect", help="Only try these effects (repeatable; default: all of the plugin's).")
+]
+_FloorSamplesOpt = Annotated[
+    int, typer.Option("--floor-samples", help="Re-simulations per gap measurement (>= 4).")
+]
+_CalibrateOpt = Annotated[
+    bool,
+    typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
+]
+_CalibrationRunsOpt = Annotated[
+    int,
+    typer.Option(
+        "--calibration-runs",
+        help="Self-consistency refinements (>= 1, each --steps trials); --calibration-summary makes their "
+        "gaps one (default: the largest).",
+    ),
+]
+_CalibrateAllOpt = Annotated[
+    bool,
+    typer.Option(
+        "--calibrate-all",
+        help="Refine every self-consistency run and control. By default only those that could change a "
+        "decision are refined (the same decisions; the null scale may then be known only as a range).",
+    ),
+]
+_CalibrationControlOpt = Annotated[
+    bool,
+    typer.Option(
+        "--calibration-control/--no-calibration-control",
+        help="Give each self-consistency run its own control (--effect-steps more trials), as the baseline has.",
+    ),
+]
+_CalibrationSummaryOpt = Annotated[
+    str,
+    typer.Option(
+        "--calibration-summary",
+        help="max or median of the self-consistency runs' gaps: the null scale's optimizer part.",
+    ),
+]
+_ThresholdOpt = Annotated[
+    float,
+    typer.Option("--threshold", help="The gap test finds the model misspecified above this many null scales."),
+]
+_RequireGapTestOpt = Annotated[
+    bool,
+    typer.Option(
+        "--require-gap-test",
+        help="Name an effect only when the gap test alone finds the model misspecified (by default an "
+        "effect's significant improvement is evidence enough).",
+    ),
+]
+_OutOpt = Annotated[Path | None, typer.Option("--out", help="Diagnosis directory (re-run to continue it).")]
+_NoVideoOpt = Annotated[bool, typer.Option("--no-video", help="Skip the side-by-side video.")]
+_LimitsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--limits/--no-limits",
+        help="Estimate each effect's detection limit (the weakest strength this clip could name) from a "
+        "ladder of simulations at the best baseline fit.",
+    ),
+]
+_RevealOpt = Annotated[
+    bool,
+    typer.Option(
+        "--reveal",
+        help="Also measure whether another camera view or a twice longer clip would lower the limits "
+        "(chaotic phenomena; re-renders and re-simulates the ladder).",
+    ),
+]
+_CheckLimitsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--check-limits",
+        help="Check each effect not named: run this diagnosis' own stages on a target made with it at its "
+        "stated limit (doubled until named, to the end of its range), so the limit is what this search names. Costly.",
+    ),
+]
+_ScreenOpt = Annotated[
+    bool,
+    typer.Option(
+        "--screen/--no-screen",
+        help="Before refining the effects, leave out those whose signature at the baseline's fit no fit "
+        "could name (a ladder of simulations; chaotic phenomena only). --no-screen refines every effect.",
+    ),
+]
+_RidgeStartsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--ridge-starts/--no-ridge-starts",
+        help="Start each effect's search also where the video points along the ridge it shares with the "
+        "base parameters (drag vs restitution), not only at the baseline's fit.",
+    ),
+]
+_WorkersOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--workers",
+        help="Run the stages after the baseline side by side in K local worker processes (default: one "
+        "per CPU; 0 or 1: in this process). The decisions do not depend on it.",
+    ),
+]
+_SchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="Run those stages on a Dask cluster (tcp://host:8786); its workers need physinfer and the "
+        "plugins installed and must see --out.",
+    ),
+]
 
 
 @handle_errors()
 def diagnose_cmd(
     plugin: PluginOpt,
-    target: Annotated[
-        Path | None, typer.Option("--target", help="Video to diagnose; default: the plugin's embedded target.")
-    ] = None,
-    fps: Annotated[float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")] = None,
-    truth: Annotated[
-        list[str], typer.Option("--truth", help="Known true value NAME=VALUE (reported only).")
-    ] = [],  # noqa: B006
-    steps: Annotated[int | None, typer.Option("--steps", help="Baseline trials (default: the plugin's).")] = None,
-    effect_steps: Annotated[
-        int | None, typer.Option("--effect-steps", help="Trials per augmented model and for the control (default: --steps).")
-    ] = None,
-    effect: Annotated[
-        list[str], typer.Option("--effect", help="Only try these effects (repeatable; default: all of the plugin's).")
-    ] = [],  # noqa: B006
-    optimizer: Annotated[str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")] = "ax",
-    embedder: Annotated[str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")] = None,
+    target: _TargetOpt = None,
+    fps: FpsOpt = None,
+    truth: _TruthOpt = [],  # noqa: B006
+    steps: _StepsOpt = None,
+    effect_steps: _EffectStepsOpt = None,
+    effect: _EffectOpt = [],  # noqa: B006
+    optimizer: OptimizerOpt = "ax",
+    embedder: EmbedderOpt = None,
     embedder_frames: EmbedderFramesOpt = None,
     duration: DurationOpt = None,
     fix: FixOpt = [],  # noqa: B006
-    weights: Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")] = None,
-    device: Annotated[str | None, typer.Option("--device", help="torch device (default: cuda if present).")] = None,
-    render_set: Annotated[
-        list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
-    ] = [],  # noqa: B006
-    floor_samples: Annotated[
-        int, typer.Option("--floor-samples", help="Re-simulations per gap measurement (>= 4).")
-    ] = 6,
+    weights: WeightsOpt = None,
+    device: TorchDeviceOpt = None,
+    render_set: RenderSetOpt = [],  # noqa: B006
+    floor_samples: _FloorSamplesOpt = 6,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
     batch_size: DiagnoseBatchSizeOpt = None,
-    calibrate: Annotated[
-        bool,
-        typer.Option("--calibrate/--no-calibrate", help="Self-consistency refinements to calibrate the null scale."),
-    ] = True,
-    calibration_runs: Annotated[
-        int,
-        typer.Option(
-            "--calibration-runs",
-            help="Self-consistency refinements (>= 1, each --steps trials); --calibration-summary makes their "
-            "gaps one (default: the largest).",
-        ),
-    ] = 3,
-    calibrate_all: Annotated[
-        bool,
-        typer.Option(
-            "--calibrate-all",
-            help="Refine every self-consistency run and control. By default only those that could change a "
-            "decision are refined (the same decisions; the null scale may then be known only as a range).",
-        ),
-    ] = False,
-    calibration_control: Annotated[
-        bool,
-        typer.Option(
-            "--calibration-control/--no-calibration-control",
-            help="Give each self-consistency run its own control (--effect-steps more trials), as the baseline has.",
-        ),
-    ] = True,
-    calibration_summary: Annotated[
-        str,
-        typer.Option(
-            "--calibration-summary",
-            help="max or median of the self-consistency runs' gaps: the null scale's optimizer part.",
-        ),
-    ] = "max",
-    threshold: Annotated[
-        float,
-        typer.Option("--threshold", help="The gap test finds the model misspecified above this many null scales."),
-    ] = 2.0,
-    require_gap_test: Annotated[
-        bool,
-        typer.Option(
-            "--require-gap-test",
-            help="Name an effect only when the gap test alone finds the model misspecified (by default an "
-            "effect's significant improvement is evidence enough).",
-        ),
-    ] = False,
+    calibrate: _CalibrateOpt = True,
+    calibration_runs: _CalibrationRunsOpt = 3,
+    calibrate_all: _CalibrateAllOpt = False,
+    calibration_control: _CalibrationControlOpt = True,
+    calibration_summary: _CalibrationSummaryOpt = "max",
+    threshold: _ThresholdOpt = 2.0,
+    require_gap_test: _RequireGapTestOpt = False,
     seed: SeedOpt = 0,
-    out: Annotated[Path | None, typer.Option("--out", help="Diagnosis directory (re-run to continue it).")] = None,
-    no_video: Annotated[bool, typer.Option("--no-video", help="Skip the side-by-side video.")] = False,
-    limits: Annotated[
-        bool,
-        typer.Option(
-            "--limits/--no-limits",
-            help="Estimate each effect's detection limit (the weakest strength this clip could name) from a "
-            "ladder of simulations at the best baseline fit.",
-        ),
-    ] = True,
-    reveal: Annotated[
-        bool,
-        typer.Option(
-            "--reveal",
-            help="Also measure whether another camera view or a twice longer clip would lower the limits "
-            "(chaotic phenomena; re-renders and re-simulates the ladder).",
-        ),
-    ] = False,
-    check_limits: Annotated[
-        bool,
-        typer.Option(
-            "--check-limits",
-            help="Check each effect not named: run this diagnosis' own stages on a target made with it at its "
-            "stated limit (doubled until named, to the end of its range), so the limit is what this search names. Costly.",
-        ),
-    ] = False,
-    screen: Annotated[
-        bool,
-        typer.Option(
-            "--screen/--no-screen",
-            help="Before refining the effects, leave out those whose signature at the baseline's fit no fit "
-            "could name (a ladder of simulations; chaotic phenomena only). --no-screen refines every effect.",
-        ),
-    ] = True,
-    ridge_starts: Annotated[
-        bool,
-        typer.Option(
-            "--ridge-starts/--no-ridge-starts",
-            help="Start each effect's search also where the video points along the ridge it shares with the "
-            "base parameters (drag vs restitution), not only at the baseline's fit.",
-        ),
-    ] = True,
+    out: _OutOpt = None,
+    no_video: _NoVideoOpt = False,
+    limits: _LimitsOpt = True,
+    reveal: _RevealOpt = False,
+    check_limits: _CheckLimitsOpt = False,
+    screen: _ScreenOpt = True,
+    ridge_starts: _RidgeStartsOpt = True,
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
-    workers: Annotated[
-        int | None,
-        typer.Option(
-            "--workers",
-            help="Run the stages after the baseline side by side in K local worker processes (default: one "
-            "per CPU; 0 or 1: in this process). The decisions do not depend on it.",
-        ),
-    ] = None,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="Run those stages on a Dask cluster (tcp://host:8786); its workers need physinfer and the "
-            "plugins installed and must see --out.",
-        ),
-    ] = None,
+    workers: _WorkersOpt = None,
+    scheduler: _SchedulerOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
     given = dict(locals())
     from physinfer import api
     from physinfer.cli.app import options_from_cli
-    from physinfer.discrepancy.limit_text import screened_line
-    from physinfer.discrepancy.limits import limit_line
-    from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 
     options = options_from_cli(api.DiagnoseOptions, given)
     diagnosis = api.diagnose(
         plugin, options, log=lambda msg: err_console.print(msg, markup=False, highlight=False), progress=True
     )
-    report, out = diagnosis.to_dict(), diagnosis.out
+    report = diagnosis.to_dict()
     if as_json:
         emit_json(report)
         return
+    for line in diagnosis_lines(report, diagnosis.out):
+        err_console.print(line, highlight=False)
+
+
+def diagnosis_lines(report: dict, out: Path) -> list[str]:
+    """What ``diagnose`` prints (without ``--json``), as rich markup: the verdict, a line per
+    effect tried (and its detection limit), the effects screened out, the effect named and
+    where the results are, the time taken."""
+    from physinfer.discrepancy.limit_text import screened_line
+
+    return [
+        _misspecified_line(report),
+        *_candidate_lines(report),
+        *[f"  {screened_line(c)}" for c in report.get("screened") or []],
+        *_named_lines(report, out),
+        timing_line(report),
+    ]
+
+
+def _misspecified_line(report: dict) -> str:
+    """``misspecified True (by the gap test)   gap 1.2 → 0.4   (noise floor ..., null scale ...)``."""
+    from physinfer.discrepancy.needed_calibration import null_scale_words
+
     by = {"gap": "the gap test", "effect": "an effect's significant improvement"}
     because = " and ".join(by[e] for e in report["misspecified_by"])
-    err_console.print(
+    return (
         f"[bold]misspecified[/] {report['misspecified']}{f' (by {because})' if because else ''}"
         f"   gap {report['gap_before']:.4g} → {report['gap_after']:.4g}"
         f"   (noise floor {report['noise_floor']:.4g}, {null_scale_words(report)},"
-        f" gap-test threshold {report['threshold']:.4g})",
-        highlight=False,
+        f" gap-test threshold {report['threshold']:.4g})"
     )
+
+
+def _candidate_lines(report: dict) -> list[str]:
+    """A line per effect tried (gap, ratio, p-value, significance, parameters on a bound), then
+    with ``--limits`` a line per effect with its detection limit and the null scale's note."""
+    from physinfer.discrepancy.limits import limit_line
+    from physinfer.discrepancy.needed_calibration import limits_scale_note
+
+    lines = []
     for c in report["candidates"]:
         mark = "[green]significant[/]" if c["significant"] else "not significant"
         bounds = "".join(f", {name} at its {side} bound" for name, side in c.get("at_bounds", {}).items())
-        err_console.print(
-            f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}{bounds}",
-            highlight=False,
-        )
+        lines.append(f"  {c['effect']}: gap {c['gap']:.4g} (x{c['ratio']:.2f}, p={c['p_value']:.3g}) {mark}{bounds}")
     if report.get("limits"):
         for c in report["candidates"]:
-            err_console.print(
-                "  " + limit_line(c, report["named_effect"], report["limits"]["clip_seconds"]), highlight=False
-            )
+            lines.append("  " + limit_line(c, report["named_effect"], report["limits"]["clip_seconds"]))
         if note := limits_scale_note(report):
-            err_console.print(f"  ({note})", highlight=False)
-    for c in report.get("screened") or []:
-        err_console.print(f"  {screened_line(c)}", highlight=False)
+            lines.append(f"  ({note})")
+    return lines
+
+
+def _named_lines(report: dict, out: Path) -> list[str]:
+    """The effect named (or none) and where the results are; what naming it leaves open."""
     named = escape(f"{report['named_effect'] or 'none'}; results in {out}")
-    err_console.print(f"[bold]named effect[/] {named}", highlight=False)
+    lines = [f"[bold]named effect[/] {named}"]
     if leaves := report.get("named_leaves"):
-        err_console.print(f"  [yellow]but[/] {escape(leaves['message'])}", highlight=False)
+        lines.append(f"  [yellow]but[/] {escape(leaves['message'])}")
     if unnamed := report.get("unnamed"):
-        err_console.print(f"  {escape(unnamed['message'])}", highlight=False)
-    err_console.print(timing_line(report), highlight=False)
+        lines.append(f"  {escape(unnamed['message'])}")
+    return lines
 
 
 def timing_line(report: dict) -> str:

@@ -4,6 +4,7 @@ and ``diagnose`` cannot drift), and how a command's parameters become the API's 
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -25,6 +26,20 @@ SelectTopOpt = Annotated[
 ]
 SelectSeedsOpt = Annotated[
     int, typer.Option("--select-seeds", help="Fresh seeds per finalist of --select-top.")
+]
+FpsOpt = Annotated[
+    float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")
+]
+OptimizerOpt = Annotated[str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")]
+EmbedderOpt = Annotated[
+    str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")
+]
+WeightsOpt = Annotated[Path | None, typer.Option("--weights", help="Embedder weights file.")]
+TorchDeviceOpt = Annotated[
+    str | None, typer.Option("--device", help="torch device (default: cuda if present).")
+]
+RenderSetOpt = Annotated[
+    list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
 ]
 DurationOpt = Annotated[
     float | None,
