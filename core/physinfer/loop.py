@@ -40,7 +40,6 @@ from physinfer.evaluation import (  # noqa: F401 - re-exported: the loop's evalu
     simulate_one,
     squared_distance,
 )
-from physinfer.io import atomic_write_json
 from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.resimulation import (  # noqa: F401 - re-exported: the loop's re-simulations
     SELECTION_SEED_SALT,
@@ -107,7 +106,8 @@ def run_refinement(
             diagnosis's workers, idle while its baseline refines; the same numbers.
 
     Returns:
-        The :class:`RefineResult` (also written by :func:`physinfer.report.write_report`).
+        The :class:`RefineResult` (the refine command writes it out:
+            :func:`physinfer.session.write_outputs`).
     """
     from physinfer.threads import refinement_torch_threads, torch_threads
 
@@ -235,26 +235,3 @@ def summarise(
         run_dir=str(run_dir),
         trials=list(records),
     )
-
-
-def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_dir: RunDirectory, seed: int) -> None:
-    """Write ``result.json``, the refinement plot, the best trajectory and the side-by-side video."""
-    from physinfer.plotting import plot_refinement
-    from physinfer.video import side_by_side, write_video
-
-    best_traj = pipeline.simulator.simulate(result.best_params, seed=seed)
-    best_traj.save(run_dir.path / "best_trajectory.npz")
-    best_clip = pipeline.renderer.render(best_traj, target.render_params)
-    write_video(run_dir.path / "side_by_side.mp4", side_by_side([target.clip, best_clip]))
-    plot_refinement(
-        result.trials, result.ground_truth, run_dir.path / "refinement.png", bands=result.extra.get("posterior")
-    )
-    result.extra.setdefault("outputs", {})
-    result.extra["outputs"] = {
-        name: str(run_dir.path / name)
-        for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
-    }
-    atomic_write_json(run_dir.path / "result.json", result.summary())
-    from physinfer.report import write_report_quietly  # report.html; a failure only warns
-
-    write_report_quietly(run_dir.path)

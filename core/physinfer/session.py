@@ -18,8 +18,9 @@ from physinfer.adequacy import assess_fit
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
+from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
-from physinfer.loop import run_refinement, write_outputs
+from physinfer.loop import run_refinement
 from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's historical API
     EffectParameterError,
     build_pipeline,
@@ -339,6 +340,31 @@ def refine(
         write_outputs(result, pipeline, target, run_dir, seed)
     pipeline.renderer.close()
     return result
+
+
+def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_dir: RunDirectory, seed: int) -> None:
+    """Write ``result.json``, the refinement plot, the best trajectory and the side-by-side video,
+    then ask the report for ``report.html``: the refine command's files (the loop writes only
+    its run directory's trial log)."""
+    from physinfer.plotting import plot_refinement
+    from physinfer.video import side_by_side, write_video
+
+    best_traj = pipeline.simulator.simulate(result.best_params, seed=seed)
+    best_traj.save(run_dir.path / "best_trajectory.npz")
+    best_clip = pipeline.renderer.render(best_traj, target.render_params)
+    write_video(run_dir.path / "side_by_side.mp4", side_by_side([target.clip, best_clip]))
+    plot_refinement(
+        result.trials, result.ground_truth, run_dir.path / "refinement.png", bands=result.extra.get("posterior")
+    )
+    result.extra.setdefault("outputs", {})
+    result.extra["outputs"] = {
+        name: str(run_dir.path / name)
+        for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
+    }
+    atomic_write_json(run_dir.path / "result.json", result.summary())
+    from physinfer.report import write_report_quietly  # report.html; a failure only warns
+
+    write_report_quietly(run_dir.path)
 
 
 class _progress:
