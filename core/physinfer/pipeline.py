@@ -191,6 +191,17 @@ def full_parameter_space(pipeline: Pipeline, fixed: Sequence[str]) -> ParameterS
     return (split_fixed(pipeline.simulator)[0] if fixed else pipeline.simulator).parameter_space
 
 
+def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
+    """The values ``--fix`` (``fixed``, its items) holds in ``pipeline``; ``{}`` without it.
+
+    Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
+    parameters fixed (the diagnose benchmark's ``flag_lite``) has not had them fixed by the user.
+    """
+    from physinfer.fixed import split_fixed
+
+    return split_fixed(pipeline.simulator)[1] if fixed else {}
+
+
 def load_target(
     pipeline: Pipeline,
     target_path: Path | None,

@@ -413,6 +413,25 @@ def _show(value: Any, missing: str) -> str:
     return str(value)
 
 
+def optional_settings(
+    fixed: Mapping[str, float], duration_s: float | None, embedder_frames: int | None
+) -> dict[str, Any]:
+    """The ``run.json`` (and ``model.json``) entries of ``--fix``, ``--duration`` and
+    ``--embedder-frames``: only those set.
+
+    All are resume keys; leaving an unset one out keeps runs made before the option existed
+    resumable.
+    """
+    settings: dict[str, Any] = {}
+    if fixed:
+        settings["fixed"] = dict(fixed)
+    if duration_s is not None:
+        settings["duration_s"] = duration_s
+    if embedder_frames is not None:
+        settings["embedder_frames"] = embedder_frames
+    return settings
+
+
 def embedding_fingerprint(embedding: np.ndarray) -> list[float]:
     """A short, fixed random projection of an embedding, stored in ``run.json``.
 

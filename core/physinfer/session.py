@@ -25,6 +25,7 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     EffectParameterError,
     build_pipeline,
     effect_parameters,
+    fixed_by_user,
     full_parameter_space,
     load_target,
     make_simulator,
@@ -34,28 +35,9 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
 from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
-from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord
+from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord, optional_settings
 from physinfer.scene import scene_of
 from physinfer.threads import with_refinement_threads
-
-
-def optional_settings(
-    fixed: Mapping[str, float], duration_s: float | None, embedder_frames: int | None
-) -> dict[str, Any]:
-    """The ``run.json`` (and ``model.json``) entries of ``--fix``, ``--duration`` and
-    ``--embedder-frames``: only those set.
-
-    All are resume keys; leaving an unset one out keeps runs made before the option existed
-    resumable.
-    """
-    settings: dict[str, Any] = {}
-    if fixed:
-        settings["fixed"] = dict(fixed)
-    if duration_s is not None:
-        settings["duration_s"] = duration_s
-    if embedder_frames is not None:
-        settings["embedder_frames"] = embedder_frames
-    return settings
 
 
 def resume_identity(target: Target, weights: Path | None) -> dict[str, Any]:
@@ -70,19 +52,6 @@ def resume_identity(target: Target, weights: Path | None) -> dict[str, Any]:
         "target_sha256": array_sha256(target.clip.frames, float(target.clip.fps)),
         "weights_sha256": path_sha256(weights) if weights is not None and Path(weights).exists() else None,
     }
-
-
-def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
-    """The values ``--fix`` (``fixed``, its items) holds in ``pipeline``; ``{}`` without it.
-
-    Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
-    parameters fixed (the diagnose benchmark's ``flag_lite``) has not had them fixed by the user.
-    """
-    from physinfer.fixed import split_fixed
-
-    return split_fixed(pipeline.simulator)[1] if fixed else {}
-
-
 
 
 #: Narrowest search box per parameter, normalised (a tenth of the range).

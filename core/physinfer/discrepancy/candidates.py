@@ -13,8 +13,8 @@ from collections.abc import Mapping
 from physinfer.evaluation import Pipeline
 from physinfer.fixed import FixedParameters
 from physinfer.parameters import ParameterSpace
+from physinfer.pipeline import make_simulator
 from physinfer.roles import Effect
-from physinfer.session import make_simulator
 
 
 def off_values(space: ParameterSpace) -> dict[str, float]:

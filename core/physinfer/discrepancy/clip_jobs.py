@@ -85,7 +85,7 @@ def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
 def _model(registry: Any, base: Pipeline, settings: DiagnoseSettings, effects: tuple[str, ...]) -> Pipeline:
     """``base`` with ``effects`` switched in, built once per worker thread."""
     from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.session import fixed_by_user
+    from physinfer.pipeline import fixed_by_user
 
     if not effects:
         return base

@@ -45,7 +45,7 @@ from physinfer.discrepancy.stages import (
 )
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import noise_seeds
-from physinfer.session import fixed_by_user
+from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.workflow import DiagnoseSettings

@@ -14,10 +14,10 @@ from physinfer.discrepancy.stages import Stage
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import noise_seeds
+from physinfer.pipeline import build_pipeline, fixed_by_user
 from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
-from physinfer.session import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
@@ -106,8 +106,6 @@ def run_limits(
     }
 
     def make_longer(seconds: float) -> tuple[Any, dict[str, Any], Any]:
-        from physinfer.session import build_pipeline
-
         frames = settings.embedder_frames or getattr(base.embedder, "n_frames", None)
         longer = build_pipeline(
             registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,

@@ -12,10 +12,11 @@ from physinfer.discrepancy.gap import gap_numbers
 from physinfer.discrepancy.localise import localise
 from physinfer.discrepancy.stages import Stage, clip_of
 from physinfer.noise import NoiseFloor
+from physinfer.pipeline import fixed_by_user, full_parameter_space
 from physinfer.refinement import RefineResult
 from physinfer.roles import Target
+from physinfer.rundir import optional_settings
 from physinfer.scene import scene_of
-from physinfer.session import fixed_by_user, full_parameter_space, optional_settings
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.workflow import DiagnoseSettings

@@ -182,7 +182,7 @@ def _probe_all(
 ) -> dict[str, dict[str, Any]]:
     """Every effect's ridge points with ``probe`` (see :func:`ridge_starts`)."""
     from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.session import fixed_by_user
+    from physinfer.pipeline import fixed_by_user
 
     space = base.simulator.parameter_space
     goal = np.asarray(target_embedding, dtype=np.float64)

@@ -185,7 +185,7 @@ def _simulate(
     effect without them) is simulated here."""
     from physinfer.discrepancy.candidates import augmented_pipeline
     from physinfer.discrepancy.clip_jobs import concurrently, pooled_probes
-    from physinfer.session import fixed_by_user
+    from physinfer.pipeline import fixed_by_user
 
     fixed = fixed_by_user(base, settings.fixed)
     models = {name: augmented_pipeline(base, [effect_objs[name]], settings.duration_s, fixed) for name in names}

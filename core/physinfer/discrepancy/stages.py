@@ -25,12 +25,12 @@ from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.loop import run_refinement
 from physinfer.noise import NoiseFloor, noise_seeds
+from physinfer.pipeline import EffectParameterError, build_pipeline, fixed_by_user
 from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Effect, Target
-from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord
+from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord, optional_settings
 from physinfer.scene import scene_of
-from physinfer.session import fixed_by_user, optional_settings
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.workflow import DiagnoseSettings
@@ -85,8 +85,6 @@ class GapContext:
 
 def build_base(registry: Registry, settings: DiagnoseSettings) -> Pipeline:
     """The baseline model (no effects) the diagnosis' settings describe."""
-    from physinfer.session import EffectParameterError, build_pipeline
-
     try:
         return build_pipeline(
             registry, settings.plugin, embedder=settings.embedder, weights=settings.weights, device=settings.device,
