@@ -13,15 +13,21 @@ from physinfer.cli.options import (
     BatchSizeOpt,
     DurationOpt,
     EmbedderFramesOpt,
+    EmbedderOpt,
     FixOpt,
+    FpsOpt,
     JsonOpt,
     NoPrepareOpt,
+    OptimizerOpt,
     PluginOpt,
+    RenderSetOpt,
     RoiOpt,
     SceneSetOpt,
     SeedOpt,
     SelectSeedsOpt,
     SelectTopOpt,
+    TorchDeviceOpt,
+    WeightsOpt,
     options_from_cli,
 )
 from physinfer.console import err_console
@@ -30,124 +36,125 @@ from physinfer.console import err_console
 NOISE_RATIO_HINT = 1.5
 
 
+# The options only ``refine`` has, declared here so its signature reads as a list of settings.
+_TargetOpt = Annotated[
+    Path | None,
+    typer.Option("--target", help="Video to match; default: the plugin's embedded target."),
+]
+_TruthOpt = Annotated[
+    list[str], typer.Option("--truth", help="Known true value NAME=VALUE, for error reporting.")
+]
+_StepsOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--steps",
+        help="Trials in all (default: the plugin's; fewer when the search starts from a posterior estimator).",
+    ),
+]
+_EffectOpt = Annotated[list[str], typer.Option("--effect", help="Switch an effect in (repeatable).")]
+_ModelOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--model",
+        help="Model file from `physinfer diagnose`: its effects, warm-started from its fit.",
+    ),
+]
+_OutOpt = Annotated[
+    Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")
+]
+_ResumeOpt = Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")]
+_OverwriteOpt = Annotated[bool, typer.Option("--overwrite", help="Replace a finished run in --out.")]
+_NoiseSamplesOpt = Annotated[
+    int,
+    typer.Option(
+        "--noise-samples",
+        help="Re-simulate the centre under this many seeds first and tell the optimizer the "
+        "spread of the distance as its noise (0: let the optimizer infer it).",
+    ),
+]
+_SeedsPerTrialOpt = Annotated[
+    int, typer.Option("--seeds-per-trial", help="Average each trial's distance over this many seeds.")
+]
+_FloorSamplesOpt = Annotated[
+    int,
+    typer.Option(
+        "--floor-samples",
+        help="Re-simulate the best fit under this many seeds to report the noise floor (0: skip).",
+    ),
+]
+_WorkersOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--workers",
+        help="Simulate and render each step's trials in K local worker processes (with --batch-size "
+        "or --seeds-per-trial; 0: the same path in this process). Default: in this process.",
+    ),
+]
+_SchedulerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="Simulate and render the trials on a Dask cluster (tcp://host:8786); its workers need "
+        "physinfer and the plugin installed.",
+    ),
+]
+_PosteriorOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--posterior",
+        help="Posterior estimator (`physinfer posterior train`): start the search at the target's "
+        "posterior median, search the region it covers, and report the posterior refined by the "
+        "trials. Default: the plugin's shipped one, where it applies.",
+    ),
+]
+_NoPosteriorOpt = Annotated[
+    bool, typer.Option("--no-posterior", help="Use no posterior estimator (a best fit only).")
+]
+_NoRenderEstimateOpt = Annotated[
+    bool,
+    typer.Option(
+        "--no-render-estimate",
+        help="Render simulations at the default camera instead of the one estimated from --target "
+        "(--render-set overrides either way).",
+    ),
+]
+
+
 @handle_errors()
 def refine_cmd(
     plugin: PluginOpt,
-    target: Annotated[
-        Path | None,
-        typer.Option("--target", help="Video to match; default: the plugin's embedded target."),
-    ] = None,
-    fps: Annotated[
-        float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")
-    ] = None,
-    truth: Annotated[
-        list[str], typer.Option("--truth", help="Known true value NAME=VALUE, for error reporting.")
-    ] = [],  # noqa: B006
-    steps: Annotated[
-        int | None, typer.Option(
-            "--steps",
-            help="Trials in all (default: the plugin's; fewer when the search starts from a posterior estimator).",
-        )
-    ] = None,
-    optimizer: Annotated[
-        str, typer.Option("--optimizer", help="ax, random, cma, or a plugin's.")
-    ] = "ax",
-    embedder: Annotated[
-        str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")
-    ] = None,
-    weights: Annotated[
-        Path | None, typer.Option("--weights", help="Embedder weights file.")
-    ] = None,
-    device: Annotated[
-        str | None, typer.Option("--device", help="torch device (default: cuda if present).")
-    ] = None,
-    effect: Annotated[
-        list[str], typer.Option("--effect", help="Switch an effect in (repeatable).")
-    ] = [],  # noqa: B006
-    model: Annotated[
-        Path | None,
-        typer.Option(
-            "--model",
-            help="Model file from `physinfer diagnose`: its effects, warm-started from its fit.",
-        ),
-    ] = None,
-    render_set: Annotated[
-        list[str], typer.Option("--render-set", help="Render setting NAME=VALUE for simulations.")
-    ] = [],  # noqa: B006
+    target: _TargetOpt = None,
+    fps: FpsOpt = None,
+    truth: _TruthOpt = [],  # noqa: B006
+    steps: _StepsOpt = None,
+    optimizer: OptimizerOpt = "ax",
+    embedder: EmbedderOpt = None,
+    weights: WeightsOpt = None,
+    device: TorchDeviceOpt = None,
+    effect: _EffectOpt = [],  # noqa: B006
+    model: _ModelOpt = None,
+    render_set: RenderSetOpt = [],  # noqa: B006
     fix: FixOpt = [],  # noqa: B006
     seed: SeedOpt = 0,
-    out: Annotated[
-        Path | None, typer.Option("--out", help="Run directory (default: runs/<plugin>-<time>).")
-    ] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out.")] = False,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace a finished run in --out.")
-    ] = False,
-    noise_samples: Annotated[
-        int,
-        typer.Option(
-            "--noise-samples",
-            help="Re-simulate the centre under this many seeds first and tell the optimizer the "
-            "spread of the distance as its noise (0: let the optimizer infer it).",
-        ),
-    ] = 3,
-    seeds_per_trial: Annotated[
-        int,
-        typer.Option(
-            "--seeds-per-trial", help="Average each trial's distance over this many seeds."
-        ),
-    ] = 1,
-    floor_samples: Annotated[
-        int,
-        typer.Option(
-            "--floor-samples",
-            help="Re-simulate the best fit under this many seeds to report the noise floor (0: skip).",
-        ),
-    ] = 4,
+    out: _OutOpt = None,
+    resume: _ResumeOpt = False,
+    overwrite: _OverwriteOpt = False,
+    noise_samples: _NoiseSamplesOpt = 3,
+    seeds_per_trial: _SeedsPerTrialOpt = 1,
+    floor_samples: _FloorSamplesOpt = 4,
     select_top: SelectTopOpt = 0,
     select_seeds: SelectSeedsOpt = 3,
     batch_size: BatchSizeOpt = 1,
-    workers: Annotated[
-        int | None,
-        typer.Option(
-            "--workers",
-            help="Simulate and render each step's trials in K local worker processes (with --batch-size "
-            "or --seeds-per-trial; 0: the same path in this process). Default: in this process.",
-        ),
-    ] = None,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="Simulate and render the trials on a Dask cluster (tcp://host:8786); its workers need "
-            "physinfer and the plugin installed.",
-        ),
-    ] = None,
+    workers: _WorkersOpt = None,
+    scheduler: _SchedulerOpt = None,
     duration: DurationOpt = None,
     embedder_frames: EmbedderFramesOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
-    posterior: Annotated[
-        Path | None,
-        typer.Option(
-            "--posterior",
-            help="Posterior estimator (`physinfer posterior train`): start the search at the target's "
-            "posterior median, search the region it covers, and report the posterior refined by the "
-            "trials. Default: the plugin's shipped one, where it applies.",
-        ),
-    ] = None,
-    no_posterior: Annotated[
-        bool, typer.Option("--no-posterior", help="Use no posterior estimator (a best fit only).")
-    ] = False,
+    posterior: _PosteriorOpt = None,
+    no_posterior: _NoPosteriorOpt = False,
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
-    no_render_estimate: Annotated[
-        bool,
-        typer.Option(
-            "--no-render-estimate",
-            help="Render simulations at the default camera instead of the one estimated from --target "
-            "(--render-set overrides either way).",
-        ),
-    ] = False,
+    no_render_estimate: _NoRenderEstimateOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
@@ -168,6 +175,21 @@ def refine_result_lines(result: Any) -> list[str]:
     best fit, posterior median, 90 % interval and label; the others named on one line (their
     best fit is where the search stopped, and a bound it stopped on says nothing either);
     correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
+    marginals = result.extra.get("posterior") or {}
+    hidden = [
+        n for n in result.best_params if marginals.get(n, {}).get("label") == "not identified"
+    ]
+    at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}
+    return [
+        *_fit_lines(result),
+        *_parameter_lines(result, marginals, hidden, at_bounds),
+        *_note_lines(result, at_bounds),
+        f"results in {result.run_dir}",
+    ]
+
+
+def _fit_lines(result: Any) -> list[str]:
+    """The best distance, whether the best fit reproduces the video, the scene."""
     from physinfer.adequacy import verdict_line
 
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
@@ -179,21 +201,24 @@ def refine_result_lines(result: Any) -> list[str]:
             f"  the best fit reproduces the video ({adequacy['statistic']:.3g} times the scale of agreement, "
             f"≤ {adequacy['threshold']:g})"
         )
-    nuisance = result.extra.get("nuisance") or {}
     if result.extra.get("scene"):
         from physinfer.scene import scene_text
 
         lines.append(f"  scene: {scene_text(result.extra['scene'])}")
-    marginals = result.extra.get("posterior") or {}
-    hidden = [
-        n for n in result.best_params if marginals.get(n, {}).get("label") == "not identified"
+    return lines
+
+
+def _parameter_lines(
+    result: Any, marginals: dict, hidden: list[str], at_bounds: dict[str, str]
+) -> list[str]:
+    """A line per parameter the video determines, then the nuisance values on one line and the
+    parameters not identified on another."""
+    nuisance = result.extra.get("nuisance") or {}
+    lines = [
+        best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name))
+        for name, value in result.best_params.items()
+        if name not in hidden and name not in nuisance
     ]
-    at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}
-    for name, value in result.best_params.items():
-        if name not in hidden and name not in nuisance:
-            lines.append(
-                best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name))
-            )
     if nuisance:
         lines.append(
             "  nuisance (what the video leaves open, not a measurement): "
@@ -210,8 +235,15 @@ def refine_result_lines(result: Any) -> list[str]:
             f"  not identified (the video barely narrows their ranges; best fits and intervals in "
             f"result.json): {names}"
         )
-    for pair in (result.extra.get("correlations") or [])[:2]:
-        lines.append(f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}")
+    return lines
+
+
+def _note_lines(result: Any, at_bounds: dict[str, str]) -> list[str]:
+    """Correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
+    lines = [
+        f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}"
+        for pair in (result.extra.get("correlations") or [])[:2]
+    ]
     if result.extra.get("posterior_note"):
         lines.append(result.extra["posterior_note"])
     if result.extra.get("posterior_source"):
@@ -228,7 +260,6 @@ def refine_result_lines(result: Any) -> list[str]:
     hint = noise_ratio_hint((result.extra.get("noise_floor") or {}).get("ratio"))
     if hint:
         lines.append(hint)
-    lines.append(f"results in {result.run_dir}")
     return lines
 
 
