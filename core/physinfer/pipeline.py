@@ -1,8 +1,9 @@
-"""Build a phenomenon's pipeline from the registry and load the video it is compared with.
+"""Build a phenomenon's pipeline from the registry: its simulator (with effects and ``--fix``),
+renderer and embedder.
 
 Below the loop and every command: the session (:mod:`physinfer.session`), the trial workers
 (which rebuild the pipeline in each worker process), the posterior and the diagnosis build
-pipelines and targets here.
+pipelines here; the video a pipeline is compared with is loaded by :mod:`physinfer.target`.
 """
 
 from __future__ import annotations
@@ -13,13 +14,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from physinfer.conditioning import Conditioning
 from physinfer.errors import PhysinferError, UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.parameters import (
     ParameterSpace,
     UnknownParameterError,
-    parse_float_assignments,
     refuse_repeats,
 )
 from physinfer.registry import Registry, accepts_keyword
@@ -200,45 +199,3 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
     from physinfer.fixed import split_fixed
 
     return split_fixed(pipeline.simulator)[1] if fixed else {}
-
-
-def load_target(
-    pipeline: Pipeline,
-    target_path: Path | None,
-    *,
-    fps: float | None,
-    truth: Sequence[str],
-    render_set: Mapping[str, Any],
-    fixed: Sequence[str] = (),
-    conditioning: Conditioning | None = None,
-) -> Target:
-    """The user's video (with ``--truth`` and ζ) or the phenomenon's embedded target.
-
-    ``fixed``: ``--fix``'s items (their parameters may have a ``--truth`` too).
-    ``conditioning``: how a user's video is framed and its ζ estimated
-    (:mod:`physinfer.conditioning`); ``None``: used as it is, at the default ζ.
-    """
-    truth_values = parse_float_assignments(truth, "--truth")
-    space = full_parameter_space(pipeline, fixed)
-    for name in truth_values:
-        space[name]  # unknown names fail with the list of known ones
-    if target_path is None:
-        target = pipeline.phenomenon.default_target()
-        zeta = pipeline.renderer.check_render_params({**target.render_params, **render_set})
-        merged_truth = {**(target.truth or {}), **truth_values}
-        return Target(target.clip, merged_truth or None, zeta, target.description)
-    from physinfer.video import read_target_video
-
-    defaults = pipeline.renderer.default_render_params
-    pipeline.renderer.check_render_params({**defaults, **render_set})  # a typo costs no framing
-    clip = read_target_video(target_path, fps=fps)
-    estimated: dict[str, Any] = {}
-    conditions = None
-    if conditioning is not None:
-        from physinfer.conditioning import condition_target
-
-        clip, estimated, conditions = condition_target(
-            pipeline.phenomenon, pipeline.embedder, clip, conditioning, render_set
-        )
-    zeta = pipeline.renderer.check_render_params({**defaults, **estimated, **render_set})
-    return Target(clip, truth_values or None, zeta, str(target_path), conditions)

@@ -1,9 +1,11 @@
-"""Run a refinement end to end: the pipeline and target (:mod:`physinfer.pipeline`), the
-run directory and its identity, the posterior's start, the loop with a progress bar, and
-the outputs.
+"""Run a refinement end to end: the pipeline (:mod:`physinfer.pipeline`) and target
+(:mod:`physinfer.target`), the run directory and its identity, the posterior's start, the
+loop with a progress bar, and the outputs (result files, figures, videos, the report): the
+refine command.
 
-:mod:`physinfer.api` calls :func:`refine`; the pipeline builders are re-exported here for
-code written before they moved to :mod:`physinfer.pipeline`.
+:mod:`physinfer.api` calls :func:`refine`; the pipeline builders and :func:`load_target` are
+re-exported here for code written before they moved to :mod:`physinfer.pipeline` and
+:mod:`physinfer.target`.
 """
 
 from __future__ import annotations
@@ -27,7 +29,6 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     effect_parameters,
     fixed_by_user,
     full_parameter_space,
-    load_target,
     make_simulator,
     naming_effects,
     target_duration,
@@ -37,6 +38,7 @@ from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord, optional_settings
 from physinfer.scene import scene_of
+from physinfer.target import load_target
 from physinfer.threads import with_refinement_threads
 
 

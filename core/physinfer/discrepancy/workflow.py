@@ -76,12 +76,13 @@ from physinfer.locking import exclusive_directory
 from physinfer.noise import noise_seeds
 from physinfer.outputs import OutputFolder
 from physinfer.parameters import refuse_repeats
-from physinfer.pipeline import load_target, target_duration
+from physinfer.pipeline import target_duration
 from physinfer.progress import StageProgress
 from physinfer.refinement import RefineConfig
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.scene import scene_of
+from physinfer.target import load_target
 
 Log = Callable[[str], None]
 

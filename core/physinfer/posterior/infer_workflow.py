@@ -179,7 +179,8 @@ def infer(
         UserInputError: a mismatched or damaged estimator (another scene included), a
             target too short for it, an unreadable video.
     """
-    from physinfer.pipeline import build_pipeline, load_target
+    from physinfer.pipeline import build_pipeline
+    from physinfer.target import load_target
 
     if n_samples < 100:
         raise UserInputError(
