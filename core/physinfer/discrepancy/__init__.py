@@ -13,10 +13,14 @@ __all__ = ["DecisionRule", "DiagnoseSettings", "LocaliseConfig", "read_model", "
 
 
 def __getattr__(name: str) -> Any:
-    if name in ("DiagnoseSettings", "run_diagnosis"):
-        from physinfer.discrepancy import workflow
+    if name == "DiagnoseSettings":
+        from physinfer.discrepancy.settings import DiagnoseSettings
 
-        return getattr(workflow, name)
+        return DiagnoseSettings
+    if name == "run_diagnosis":
+        from physinfer.discrepancy.workflow import run_diagnosis
+
+        return run_diagnosis
     if name == "DecisionRule":
         from physinfer.discrepancy.decide import DecisionRule
 

@@ -17,7 +17,7 @@ from physinfer.progress import StageProgress
 from physinfer.roles import Target
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
 Log = Callable[[str], None]
 #: Every decision at a null scale: the candidates' records, the verdict, the named effect.

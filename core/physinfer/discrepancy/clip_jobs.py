@@ -26,12 +26,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
-from physinfer.discrepancy.ladder import Probe, stack_rows
+from physinfer.discrepancy.ladder import Probe, ProbeFactory, stack_rows
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.limits import ProbeFactory
     from physinfer.discrepancy.parallel import WorkerPool
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.evaluation import ClipEmbedder, Pipeline
 
 Log = Callable[[str], None]

@@ -1,10 +1,11 @@
 """The detection-limit ladder: an effect switched on at a few strengths at θ̂, and its distances.
 
-Part of :mod:`physinfer.discrepancy.limits` (the method is described there). This module only
-measures: which effect parameters a ladder moves (:func:`strength_path`), simulating and
-embedding at the target's ζ (:class:`Probe`), the rungs themselves (:func:`run_ladder`) and
-the two distance summaries every decision reads — the median distance between two sets of
-clips (:func:`cross_median`) and within one (:func:`pairwise_median`, a noise floor).
+Part of :mod:`physinfer.discrepancy.limits` (the method is described there). This module holds
+what the ladder is given (:class:`LimitInputs`, which the reveal reads too) and measures: which effect parameters a ladder moves (:func:`strength_path`),
+simulating and embedding at the target's ζ (:class:`Probe`), the rungs themselves
+(:func:`run_ladder`) and the two distance summaries every decision reads — the median distance
+between two sets of clips (:func:`cross_median`) and within one (:func:`pairwise_median`, a
+noise floor).
 
 Multi-parameter effects: the ladder moves the parameters whose *off* value lies on a bound
 (magnitudes, e.g. a gust intensity) and holds those with an interior default at it (shapes,
@@ -13,12 +14,13 @@ e.g. the gusts' time scale, 1 s); when none lies on a bound, all move.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from physinfer.discrepancy.decide import DecisionRule
 from physinfer.evaluation import Pipeline, simulate_many, squared_distance
 from physinfer.parameters import ParameterSpace
 
@@ -111,6 +113,56 @@ class Probe:
                 for traj in trajectories
             ]
         )
+
+
+#: Makes a probe whose clips run on the diagnosis' workers, one job per clip
+#: (:class:`~physinfer.discrepancy.clip_jobs.PooledProbe`); its argument: keep the trajectories.
+ProbeFactory = Callable[[bool], Probe]
+
+
+@dataclass
+class LimitInputs:
+    """What the ladder needs from the diagnosis.
+
+    Attributes:
+        base: The baseline pipeline (its simulator holds ``--fix`` values).
+        augmented: Effect name → the baseline with that effect switched in.
+        theta: θ̂, the best baseline fit (base parameters).
+        base_embeddings: ``(K, D_e)`` θ̂'s re-simulations from the gap measurement (reused).
+        render_params: The target's ζ.
+        scale: The null scale ``S``.
+        scale_low: The lower end of its range when the diagnosis knows it only as a range
+            (``scale`` is then the upper end), else ``None``.
+        rule: The decision rule.
+        floor_samples: ``K``.
+        seed: The diagnosis seed (the ladder's seeds are derived from it).
+        diagnosis_simulations: Simulations the diagnosis cost (for the budget).
+        n_candidates: Candidates the rule counts when some are not in ``augmented`` (screened
+            out: :mod:`physinfer.discrepancy.screen`); ``None``: those in ``augmented``.
+        make_longer: ``None``, or a factory that, given the current clip's seconds, returns
+            ``(base simulator, {effect: simulator}, embedder)`` recording twice as long (the
+            longer-clip what-if); it raises :class:`UserInputError` where the phenomenon
+            records a fixed length.
+    """
+
+    base: Pipeline
+    augmented: Mapping[str, Pipeline]
+    theta: Mapping[str, float]
+    base_embeddings: np.ndarray
+    render_params: Mapping[str, Any]
+    scale: float
+    rule: DecisionRule
+    floor_samples: int
+    seed: int
+    diagnosis_simulations: int
+    make_longer: Callable[[float], tuple[Any, dict[str, Any], Any]] | None = None
+    scale_low: float | None = None
+    n_candidates: int | None = None
+
+    @property
+    def candidates(self) -> int:
+        """The candidates the rule counts: ``n_candidates``, or those in ``augmented``."""
+        return len(self.augmented) if self.n_candidates is None else self.n_candidates
 
 
 def stack_rows(rows: Sequence[np.ndarray | None]) -> np.ndarray:

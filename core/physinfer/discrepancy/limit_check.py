@@ -48,7 +48,7 @@ from physinfer.noise import noise_seeds
 from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.evaluation import Pipeline
     from physinfer.registry import Registry
     from physinfer.roles import Target

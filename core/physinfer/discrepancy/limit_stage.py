@@ -21,7 +21,7 @@ from physinfer.roles import Target
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
 Log = Callable[[str], None]
 
@@ -76,7 +76,8 @@ def run_limits(
     import dataclasses
     import json
 
-    from physinfer.discrepancy.limits import LimitInputs, detection_limits
+    from physinfer.discrepancy.ladder import LimitInputs
+    from physinfer.discrepancy.limits import detection_limits
 
     theta = before.best_params
     fixed = fixed_by_user(base, settings.fixed)

@@ -41,16 +41,17 @@ line is :func:`physinfer.discrepancy.limit_text.limit_line`.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from physinfer.discrepancy.decide import DecisionRule
 from physinfer.discrepancy.ladder import (
     Ladder,
+    LimitInputs,
     Probe,
+    ProbeFactory,
     ladder_seeds,
     pairwise_median,
     run_ladder,
@@ -67,6 +68,7 @@ from physinfer.discrepancy.limit_rule import (
 from physinfer.discrepancy.limit_text import limit_line, reveal_phrase, summary_phrase
 from physinfer.discrepancy.refit import jacobian
 from physinfer.discrepancy.reveal import reveal_by_fixing, reveal_by_setting
+from physinfer.discrepancy.settings import LimitConfig
 from physinfer.evaluation import Pipeline
 from physinfer.parameters import ParameterSpace
 
@@ -86,87 +88,6 @@ __all__ = [
 ]
 
 Log = Callable[[str], None]
-
-
-@dataclass(frozen=True)
-class LimitConfig:
-    """Settings of the detection-limit ladder.
-
-    Attributes:
-        fractions: Rungs, as fractions of the way from off to the far end of the range.
-        seeds: Fresh seeds per rung (one for a deterministic phenomenon).
-        step: Forward-difference step of the Jacobian, in normalised coordinates.
-        reveal: Also measure another view and a longer clip (chaotic phenomena; costly).
-        budget_share: Most of the diagnosis's simulations the ladder may cost; fewer seeds
-            per rung (at least two) are used to stay within it.
-        search_check: Check each not-named candidate's limit with the diagnosis' own
-            stages on a target made there (:mod:`physinfer.discrepancy.limit_check`; costly).
-            Not part of the ladder's cache key: the check is kept apart.
-    """
-
-    fractions: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
-    seeds: int = 3
-    step: float = 0.4
-    reveal: bool = False
-    budget_share: float = 0.2
-    search_check: bool = False
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form (part of the cache key)."""
-        return {
-            "fractions": list(self.fractions),
-            "seeds": self.seeds,
-            "step": self.step,
-            "reveal": self.reveal,
-            "budget_share": self.budget_share,
-            # A new method invalidates a stored limits.json (2: each rung's own seed noise).
-            "method": 2,
-        }
-
-
-@dataclass
-class LimitInputs:
-    """What the ladder needs from the diagnosis.
-
-    Attributes:
-        base: The baseline pipeline (its simulator holds ``--fix`` values).
-        augmented: Effect name → the baseline with that effect switched in.
-        theta: θ̂, the best baseline fit (base parameters).
-        base_embeddings: ``(K, D_e)`` θ̂'s re-simulations from the gap measurement (reused).
-        render_params: The target's ζ.
-        scale: The null scale ``S``.
-        scale_low: The lower end of its range when the diagnosis knows it only as a range
-            (``scale`` is then the upper end), else ``None``.
-        rule: The decision rule.
-        floor_samples: ``K``.
-        seed: The diagnosis seed (the ladder's seeds are derived from it).
-        diagnosis_simulations: Simulations the diagnosis cost (for the budget).
-        n_candidates: Candidates the rule counts when some are not in ``augmented`` (screened
-            out: :mod:`physinfer.discrepancy.screen`); ``None``: those in ``augmented``.
-        make_longer: ``None``, or a factory that, given the current clip's seconds, returns
-            ``(base simulator, {effect: simulator}, embedder)`` recording twice as long (the
-            longer-clip what-if); it raises :class:`UserInputError` where the phenomenon
-            records a fixed length.
-    """
-
-    base: Pipeline
-    augmented: Mapping[str, Pipeline]
-    theta: Mapping[str, float]
-    base_embeddings: np.ndarray
-    render_params: Mapping[str, Any]
-    scale: float
-    rule: DecisionRule
-    floor_samples: int
-    seed: int
-    diagnosis_simulations: int
-    make_longer: Callable[[float], tuple[Any, dict[str, Any], Any]] | None = None
-    scale_low: float | None = None
-    n_candidates: int | None = None
-
-    @property
-    def candidates(self) -> int:
-        """The candidates the rule counts: ``n_candidates``, or those in ``augmented``."""
-        return len(self.augmented) if self.n_candidates is None else self.n_candidates
 
 
 def _plan_seeds(inputs: LimitInputs, config: LimitConfig, deterministic: bool) -> int:
@@ -238,11 +159,6 @@ def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[
         }  # fmt: skip
     limit["reveal"] = reveal_by_fixing(*common, limit, effect_space)
     return limit, ladder
-
-
-#: Makes a probe whose clips run on the diagnosis' workers, one job per clip
-#: (:class:`~physinfer.discrepancy.clip_jobs.PooledProbe`); its argument: keep the trajectories.
-ProbeFactory = Callable[[bool], Probe]
 
 
 def detection_limits(

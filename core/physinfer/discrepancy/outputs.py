@@ -19,7 +19,7 @@ from physinfer.rundir import optional_settings
 from physinfer.scene import scene_of
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
 
 def write_outputs(

@@ -15,18 +15,15 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from physinfer.discrepancy.ladder import Ladder, Probe, moved_values, pairwise_median
+from physinfer.discrepancy.ladder import Ladder, LimitInputs, Probe, moved_values, pairwise_median
 from physinfer.discrepancy.limit_rule import Threshold, effect_limit
 from physinfer.discrepancy.refit import jacobian_from
 from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
-
-if TYPE_CHECKING:
-    from physinfer.discrepancy.limits import LimitInputs
 
 Log = Callable[[str], None]
 

@@ -44,7 +44,7 @@ from physinfer.parameters import ParameterSpace
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.evaluation import Pipeline
 
 Log = Callable[[str], None]

@@ -55,7 +55,7 @@ from physinfer.io import atomic_write_json, read_keyed_json
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.evaluation import Pipeline
 
 Log = Callable[[str], None]

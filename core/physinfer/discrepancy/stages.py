@@ -33,7 +33,7 @@ from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord, optional_setti
 from physinfer.scene import scene_of
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.evaluation import ClipEmbedder
 
 #: Called after each trial of a stage with its name, the trials done and the stage's budget.
