@@ -7,7 +7,7 @@ object with ``--json``; progress on stderr).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.markup import escape
@@ -22,6 +22,7 @@ from physinfer.cli.app import (
     err_console,
     handle_errors,
 )
+from physinfer.cli.options import EmbedderOpt, FpsOpt, WeightsOpt
 
 posterior_app = typer.Typer(
     no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False
@@ -45,72 +46,79 @@ def posterior_group() -> None:
     """Amortized posteriors over θ (neural posterior estimation with sbi; docs/posterior.md)."""
 
 
+# The options only ``posterior train`` has, declared here so its signature reads as a list of settings.
+_DataOpt = Annotated[Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")]
+_EstimatorOutOpt = Annotated[
+    Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")
+]
+_OverwriteEstimatorOpt = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace --out when it exists (by default an existing file is refused before "
+        "anything is embedded or trained).",
+    ),
+]
+_TrainFramesOpt = Annotated[
+    int | None,
+    typer.Option("--embedder-frames", help="Frames a parameter-free embedder reads."),
+]
+_TrainSplitOpt = Annotated[str, typer.Option("--split", help="Dataset split to train on.")]
+_DensityOpt = Annotated[
+    str,
+    typer.Option("--density", help="Density estimator: nsf (neural spline flow), maf or mdn."),
+]
+_MaxEpochsOpt = Annotated[int, typer.Option("--max-epochs", help="Upper bound on training epochs.")]
+_PatienceOpt = Annotated[
+    int,
+    typer.Option("--patience", help="Stop after this many epochs without a better validation loss."),
+]
+_TrainSeedOpt = Annotated[
+    int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")
+]
+_EnsembleOpt = Annotated[
+    int,
+    typer.Option(
+        "--ensemble",
+        help="Flows trained with seeds SEED.. SEED+N-1; the posterior is their mixture.",
+    ),
+]
+_StoredOpt = Annotated[
+    bool,
+    typer.Option(
+        "--stored",
+        help="Train on the stored renders as they are (default: on the clips as users give videos: "
+        "camera effects, H.264 and infer's conditioning).",
+    ),
+]
+_AcceptMiscalibratedOpt = Annotated[
+    bool,
+    typer.Option(
+        "--accept-miscalibrated",
+        help="Write the estimator even when it fails its check on the held-out clips.",
+    ),
+]
+
+
 @posterior_app.command("train")
 @handle_errors()
 def train_cmd(
     plugin: PluginOpt,
-    data: Annotated[
-        Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")
-    ],
-    out: Annotated[Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")],
-    overwrite: Annotated[
-        bool,
-        typer.Option(
-            "--overwrite",
-            help="Replace --out when it exists (by default an existing file is refused before "
-            "anything is embedded or trained).",
-        ),
-    ] = False,
-    embedder: Annotated[
-        str | None, typer.Option("--embedder", help="Embedder (default: the plugin's).")
-    ] = None,
-    embedder_frames: Annotated[
-        int | None,
-        typer.Option("--embedder-frames", help="Frames a parameter-free embedder reads."),
-    ] = None,
-    weights: Annotated[
-        Path | None, typer.Option("--weights", help="Embedder weights file.")
-    ] = None,
-    split: Annotated[str, typer.Option("--split", help="Dataset split to train on.")] = "train",
-    density: Annotated[
-        str,
-        typer.Option("--density", help="Density estimator: nsf (neural spline flow), maf or mdn."),
-    ] = "nsf",
-    max_epochs: Annotated[
-        int, typer.Option("--max-epochs", help="Upper bound on training epochs.")
-    ] = 400,
-    patience: Annotated[
-        int,
-        typer.Option(
-            "--patience", help="Stop after this many epochs without a better validation loss."
-        ),
-    ] = 60,
-    seed: Annotated[
-        int, typer.Option("--seed", help="Seed of the network's initialisation and batches.")
-    ] = 0,
-    ensemble: Annotated[
-        int,
-        typer.Option(
-            "--ensemble",
-            help="Flows trained with seeds SEED.. SEED+N-1; the posterior is their mixture.",
-        ),
-    ] = 1,
+    data: _DataOpt,
+    out: _EstimatorOutOpt,
+    overwrite: _OverwriteEstimatorOpt = False,
+    embedder: EmbedderOpt = None,
+    embedder_frames: _TrainFramesOpt = None,
+    weights: WeightsOpt = None,
+    split: _TrainSplitOpt = "train",
+    density: _DensityOpt = "nsf",
+    max_epochs: _MaxEpochsOpt = 400,
+    patience: _PatienceOpt = 60,
+    seed: _TrainSeedOpt = 0,
+    ensemble: _EnsembleOpt = 1,
     device: DeviceOpt = None,
-    stored: Annotated[
-        bool,
-        typer.Option(
-            "--stored",
-            help="Train on the stored renders as they are (default: on the clips as users give videos: "
-            "camera effects, H.264 and infer's conditioning).",
-        ),
-    ] = False,
-    accept_miscalibrated: Annotated[
-        bool,
-        typer.Option(
-            "--accept-miscalibrated",
-            help="Write the estimator even when it fails its check on the held-out clips.",
-        ),
-    ] = False,
+    stored: _StoredOpt = False,
+    accept_miscalibrated: _AcceptMiscalibratedOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Train q(θ | s(x)) on a dataset's (θ, embedding) pairs, the clips sent down the path a user's
@@ -126,6 +134,13 @@ def train_cmd(
     if as_json:
         emit_json(result.to_dict())
         return
+    for line in trained_lines(result):
+        err_console.print(line, markup=False, highlight=False)
+
+
+def trained_lines(result: Any) -> list[str]:
+    """What ``posterior train`` prints (without ``--json``): how it trained and where it wrote,
+    the inputs that never varied, the held-out check."""
     t = result.estimator.config.training
     epochs, losses = t["epochs"], t["best_validation_loss"]
     if isinstance(epochs, list):  # an ensemble: one entry per flow
@@ -133,18 +148,14 @@ def train_cmd(
         how += "/".join(f"{v:.3f}" for v in losses)
     else:
         how = f"{epochs} epochs (validation loss {losses:.3f})"
-    err_console.print(
-        f"trained on {t['pairs']} clips in {how}; wrote {result.path}", markup=False, highlight=False
-    )
+    lines = [f"trained on {t['pairs']} clips in {how}; wrote {result.path}"]
     constant = result.to_dict()["constant_inputs"]
     if constant:
-        err_console.print(
+        lines.append(
             f"{constant} of {result.estimator.config.x_dim} inputs never varied in training (a still "
-            "background, say); at inference they are held at their training value",
-            markup=False, highlight=False,
-        )  # fmt: skip
-    for line in held_out_lines(result.estimator.config.held_out):
-        err_console.print(line, markup=False, highlight=False)
+            "background, say); at inference they are held at their training value"
+        )
+    return lines + held_out_lines(result.estimator.config.held_out)
 
 
 def held_out_lines(held_out: dict | None) -> list[str]:
@@ -170,9 +181,7 @@ def infer_cmd(
         Path | None, typer.Option("--target", help="Video; default: the plugin's embedded target.")
     ] = None,
     posterior: PosteriorOpt = None,
-    fps: Annotated[
-        float | None, typer.Option("--fps", help="Frame rate of --target if it cannot be read.")
-    ] = None,
+    fps: FpsOpt = None,
     truth: Annotated[
         list[str],
         typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval)."),
