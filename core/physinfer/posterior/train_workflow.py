@@ -108,58 +108,25 @@ def train_posterior(
     dataset = ClipDataset(data, split)
     check_dataset(dataset, plugin)
     pipeline = build_embedder(
-        registry,
-        plugin,
-        embedder=embedder,
-        embedder_frames=embedder_frames,
-        weights=weights,
-        device=device,
+        registry, plugin, embedder=embedder, embedder_frames=embedder_frames, weights=weights, device=device
     )
     emb = pipeline.embedder
     name = embedder or pipeline.phenomenon.default_embedder
-    clip_seconds = dataset.clip_format.n_frames / dataset.clip_format.fps
-    if clip_seconds + 1e-9 < emb.n_frames / emb.fps:
-        raise UserInputError(
-            f"the clips of {data} last {clip_seconds:.2f} s but the embedder {name!r} reads "
-            f"{emb.n_frames} frames at {emb.fps:g} fps ({emb.n_frames / emb.fps:.2f} s); generate longer "
-            "clips (dataset generate --frames N) or lower --embedder-frames"
-        )
-    check_clip_colour(dataset, emb, name)
-    probe = embedder_probe(emb)
-    identity = {
-        "plugin": plugin,
-        "embedder": name,
-        "embedder_frames": int(emb.n_frames),
-        "embedder_fps": float(emb.fps),
-        "frames_option": embedder_frames,
-        "weights": str(weights) if weights else None,
-        "probe": [float(v) for v in probe],
-        "clip_seconds": float(clip_seconds),
-    }
+    clip_seconds = _checked_clip_seconds(dataset, data, emb, name)
+    identity = _identity(plugin, name, emb, embedder_frames, weights, clip_seconds)
     t0 = time.perf_counter()
     path = TargetPath(pipeline.phenomenon, CameraModel(), seed) if as_given else None
     embedder_info = {k: identity[k] for k in ("embedder", "embedder_frames", "embedder_fps", "probe")}
     pairs = embed_dataset(
-        data,
-        split,
-        emb,
-        embedder_info,
+        data, split, emb, embedder_info, as_given=path,
         on_progress=lambda done, total: progress("embedding", done, total),
-        as_given=path,
-    )
+    )  # fmt: skip
     t1 = time.perf_counter()
     estimator = train_estimator(
-        pairs,
-        identity,
-        network=network,
-        seed=seed,
-        device=resolve_device(device),
+        pairs, identity, network=network, seed=seed, device=resolve_device(device),
         on_epoch=lambda done, total, best: progress("training", done, total),
-    )
-    estimator.config.training.update(dataset=str(Path(data).resolve().name), split=split)
-    scene = dataset.info.get("config", {}).get("scene")
-    if scene is not None:  # the clips' scene: targets of another one get no intervals from it
-        estimator.config = replace(estimator.config, scene=dict(scene))
+    )  # fmt: skip
+    _record_dataset(estimator, dataset, data, split)
     t2 = time.perf_counter()
     held_out = _check_held_out(estimator, data, split, emb, embedder_info, path, pipeline.phenomenon, progress)
     estimator.config = replace(estimator.config, held_out=held_out)
@@ -171,6 +138,53 @@ def train_posterior(
     return TrainResult(
         estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1, "held_out_check": t3 - t2}
     )
+
+
+def _checked_clip_seconds(dataset: Any, data: Path, embedder: Any, name: str) -> float:
+    """The dataset's clip length in seconds, refused when shorter than ``embedder`` reads or
+    grayscale for an embedder that reads colour."""
+    clip_seconds = dataset.clip_format.n_frames / dataset.clip_format.fps
+    reads = embedder.n_frames / embedder.fps
+    if clip_seconds + 1e-9 < reads:
+        raise UserInputError(
+            f"the clips of {data} last {clip_seconds:.2f} s but the embedder {name!r} reads "
+            f"{embedder.n_frames} frames at {embedder.fps:g} fps ({reads:.2f} s); generate longer "
+            "clips (dataset generate --frames N) or lower --embedder-frames"
+        )
+    check_clip_colour(dataset, embedder, name)
+    return clip_seconds
+
+
+def _identity(
+    plugin: str,
+    name: str,
+    embedder: Any,
+    frames_option: int | None,
+    weights: Path | None,
+    clip_seconds: float,
+) -> dict[str, Any]:
+    """What the estimator was trained on, stored in it: the embedder (its name, frames, rate
+    and its answer to a probe clip, so another embedder is told apart) and the clip length."""
+    probe = embedder_probe(embedder)
+    return {
+        "plugin": plugin,
+        "embedder": name,
+        "embedder_frames": int(embedder.n_frames),
+        "embedder_fps": float(embedder.fps),
+        "frames_option": frames_option,
+        "weights": str(weights) if weights else None,
+        "probe": [float(v) for v in probe],
+        "clip_seconds": float(clip_seconds),
+    }
+
+
+def _record_dataset(estimator: PosteriorEstimator, dataset: Any, data: Path, split: str) -> None:
+    """Note the dataset and split in the estimator's training record, and the clips' scene in
+    its config: targets of another scene get no intervals from it."""
+    estimator.config.training.update(dataset=str(Path(data).resolve().name), split=split)
+    scene = dataset.info.get("config", {}).get("scene")
+    if scene is not None:
+        estimator.config = replace(estimator.config, scene=dict(scene))
 
 
 def check_clip_colour(dataset: Any, embedder: Any, name: str) -> None:
