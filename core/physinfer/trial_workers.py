@@ -59,7 +59,7 @@ def worker_pipeline(spec: PipelineSpec) -> Any:
     """The simulator and renderer of ``spec`` in this worker thread, built on first use."""
     cache: dict[PipelineSpec, Any] = _local.__dict__.setdefault("pipelines", {})
     if spec not in cache:
-        from physinfer.datasets.worker import limit_threads
+        from physinfer.datasets.executors import limit_threads
         from physinfer.pipeline import build_pipeline
         from physinfer.plugins import load_registry
 
@@ -137,7 +137,7 @@ def trial_workers(
     if workers is None and scheduler is None:
         yield None
         return
-    from physinfer.datasets import open_executor
+    from physinfer.datasets.executors import open_executor
 
     with open_executor(workers=workers, scheduler=scheduler, threads_per_worker=spec.threads or 1) as (
         executor,

@@ -151,7 +151,7 @@ def generate_dataset(
         workers: Local worker processes (0: this process); see :func:`open_executor`.
         scheduler: Dask scheduler address.
         threads_per_worker: Thread cap per worker process (see
-            :func:`~physinfer.datasets.worker.limit_threads`).
+            :func:`~physinfer.datasets.executors.limit_threads`).
         verify: On resume, recompute the checksums of complete units (reads all data);
             ``False`` checks only that files exist with the right sizes.
         progress: Receives progress events.

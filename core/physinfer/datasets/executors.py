@@ -4,13 +4,20 @@
 :func:`~physinfer.datasets.engine.generate_dataset`: ``workers=0`` runs in this process
 (:class:`InlineExecutor`), ``workers=K`` in ``K`` spawned local processes, and a Dask
 scheduler address through ``distributed.Client.get_executor()``. :class:`ExecutorInfo`
-records which ran the units.
+records which ran the units. A local worker process starts with :func:`start_worker`: it dies
+with its parent and caps its threads (:func:`limit_threads`, which every job that runs in a
+worker calls too).
+
+The refinement's trial workers (:mod:`physinfer.trial_workers`) and the diagnosis' workers run
+on these executors as well.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import threading
+import time
 from collections.abc import Iterator
 from concurrent.futures import Executor, Future
 from contextlib import contextmanager
@@ -18,8 +25,67 @@ from dataclasses import dataclass
 from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
 
-from physinfer.datasets.worker import start_worker
 from physinfer.errors import UserInputError
+
+_THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS", "LP_NUM_THREADS")
+_threads_limited: list[int] = []
+
+
+#: Seconds between a worker's checks that the process that started it is alive.
+PARENT_POLL_S = 0.25
+
+
+def start_worker(threads: int, parent_pid: int) -> None:
+    """Initializer of a local worker process: :func:`die_with_parent`, then :func:`limit_threads`."""
+    die_with_parent(parent_pid)
+    limit_threads(threads)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """End this worker process soon after the process that started it dies (``kill -9`` too).
+
+    A process pool's workers would otherwise outlive a killed parent, each waiting for ever
+    on a job queue whose writing end it holds itself (or finishing its job first). A daemon
+    thread polls the parent's PID: when it is gone (the worker was re-parented) the worker
+    exits at once. ``prctl(PR_SET_PDEATHSIG)`` would be quicker but fires when the *thread*
+    that started the worker ends, which need not be the parent's main thread.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="physinfer-parent-watch", daemon=True).start()
+
+
+def limit_threads(n: int) -> None:
+    """Cap the threads of BLAS, OpenMP, torch, numba and llvmpipe in this process (once).
+
+    One thread per worker keeps results independent of how many workers run (parallel
+    reductions sum in a thread-dependent order) and keeps ``K`` workers from
+    oversubscribing ``K`` cores; Mesa's llvmpipe (``LP_NUM_THREADS``) would otherwise
+    start a rasteriser thread per core in every worker. Environment variables cover
+    libraries loaded later (the renderer's EGL context is created after this).
+    """
+    if _threads_limited:
+        return
+    for name in _THREAD_ENV:
+        os.environ[name] = str(n)
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(n)
+    except ImportError:  # optional: env variables still cover libraries loaded later
+        pass
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(n)
+    if "numba" in sys.modules:
+        try:
+            sys.modules["numba"].set_num_threads(n)
+        except ValueError:  # numba was started with fewer threads than n
+            pass
+    _threads_limited.append(n)
 
 
 class InlineExecutor(Executor):
