@@ -20,7 +20,7 @@ from physinfer.types import Trajectory
 from physinfer_flag.sheet_render import fitting_distance, orbit_camera, texture_coordinates
 
 if TYPE_CHECKING:
-    from physinfer_flag.render import FlagRenderParams
+    from physinfer_flag.render_params import FlagRenderParams
 
 _FRAME_HALF_SIZE = 0.68
 """Half the side of the square the automatic camera frames, in fly lengths."""
