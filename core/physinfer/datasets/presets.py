@@ -221,6 +221,34 @@ class DatasetPreset:
             UserInputError: for a count that leaves no simulation at all, an invalid
                 clip format, or ``seeds_per_theta`` below 1.
         """
+        new_sims = self._checked_sims(sims)
+        _check_clip_overrides(n_frames, size, seeds_per_theta)
+        renders = self._renders_for(new_sims, renders_per_sim)
+        clip_changes = _clip_changes(n_frames, size, channels)
+        changed = (
+            sims is not None
+            or renders_per_sim is not None
+            or sims_per_unit is not None
+            or (seeds_per_theta is not None and seeds_per_theta != self.seeds_per_theta)
+            or bool(clip_changes)
+        )
+        try:
+            return replace(
+                self,
+                name=f"{self.name}+custom" if changed and not self.name.endswith("+custom") else self.name,
+                description=f"{self.name} with overrides" if changed else self.description,
+                sims=new_sims,
+                renders=renders,
+                sims_per_unit=self.sims_per_unit if sims_per_unit is None else sims_per_unit,
+                seeds_per_theta=self.seeds_per_theta if seeds_per_theta is None else seeds_per_theta,
+                clip=replace(self.clip, **clip_changes),
+            )
+        except ValueError as exc:
+            raise UserInputError(str(exc)) from None
+
+    def _checked_sims(self, sims: int | SplitCounts | None) -> SplitCounts:
+        """``--sims`` as per-split counts (this preset's when not given), refused when it makes
+        no simulation or more than a dataset holds."""
         new_sims = self.sims if sims is None else _as_split_counts(sims, self.sims)
         if new_sims.total < 1:
             raise UserInputError("--sims must give at least one simulation")
@@ -229,18 +257,13 @@ class DatasetPreset:
                 f"--sims: {new_sims.total} simulations; a dataset holds at most {MAX_SIMULATIONS:,} "
                 "(the paper's FlagSim has 1,235): make several datasets"
             )
-        if n_frames is not None and not 1 <= n_frames <= MAX_CLIP_FRAMES:
-            raise UserInputError(f"--frames {n_frames}: give 1 to at most {MAX_CLIP_FRAMES:,} frames per clip")
-        if size is not None and not all(1 <= side <= MAX_CLIP_SIDE for side in size):
-            shown = "x".join(map(str, size))
-            raise UserInputError(f"--size {shown}: give 1 to at most {MAX_CLIP_SIDE} pixels a side")
-        if seeds_per_theta is not None and (
-            isinstance(seeds_per_theta, bool) or not isinstance(seeds_per_theta, int) or seeds_per_theta < 1
-        ):
-            raise UserInputError(
-                f"--seeds-per-theta must be a whole number of at least 1 (1: every simulation draws "
-                f"its own θ), got {seeds_per_theta!r}"
-            )
+        return new_sims
+
+    def _renders_for(
+        self, new_sims: SplitCounts, renders_per_sim: int | SplitCounts | None
+    ) -> SplitCounts:
+        """Renders per split for ``new_sims``: ``renders_per_sim`` each, or this preset's
+        average per simulation; refused when more than a dataset holds."""
         if renders_per_sim is None:
             renders = SplitCounts(
                 **{
@@ -263,33 +286,7 @@ class DatasetPreset:
                 f"{option}: {renders.total} renders; a dataset holds at most {MAX_RENDERS:,} "
                 "(the paper's FlagSim has 21,300): make several datasets"
             )
-        clip_changes: dict[str, int] = {}
-        if n_frames is not None:
-            clip_changes["n_frames"] = n_frames
-        if size is not None:
-            clip_changes["height"], clip_changes["width"] = size
-        if channels is not None:
-            clip_changes["channels"] = channels
-        changed = (
-            sims is not None
-            or renders_per_sim is not None
-            or sims_per_unit is not None
-            or (seeds_per_theta is not None and seeds_per_theta != self.seeds_per_theta)
-            or bool(clip_changes)
-        )
-        try:
-            return replace(
-                self,
-                name=f"{self.name}+custom" if changed and not self.name.endswith("+custom") else self.name,
-                description=f"{self.name} with overrides" if changed else self.description,
-                sims=new_sims,
-                renders=renders,
-                sims_per_unit=self.sims_per_unit if sims_per_unit is None else sims_per_unit,
-                seeds_per_theta=self.seeds_per_theta if seeds_per_theta is None else seeds_per_theta,
-                clip=replace(self.clip, **clip_changes),
-            )
-        except ValueError as exc:
-            raise UserInputError(str(exc)) from None
+        return renders
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description.
@@ -343,6 +340,38 @@ def _as_split_counts(sims: int | SplitCounts, proportions: SplitCounts) -> Split
             counts[donor] -= 1
             counts[i] = 1
     return SplitCounts(*counts)
+
+
+def _check_clip_overrides(
+    n_frames: int | None, size: tuple[int, int] | None, seeds_per_theta: int | None
+) -> None:
+    """Refuse a clip length or size out of bounds, or ``seeds_per_theta`` below 1."""
+    if n_frames is not None and not 1 <= n_frames <= MAX_CLIP_FRAMES:
+        raise UserInputError(f"--frames {n_frames}: give 1 to at most {MAX_CLIP_FRAMES:,} frames per clip")
+    if size is not None and not all(1 <= side <= MAX_CLIP_SIDE for side in size):
+        shown = "x".join(map(str, size))
+        raise UserInputError(f"--size {shown}: give 1 to at most {MAX_CLIP_SIDE} pixels a side")
+    if seeds_per_theta is not None and (
+        isinstance(seeds_per_theta, bool) or not isinstance(seeds_per_theta, int) or seeds_per_theta < 1
+    ):
+        raise UserInputError(
+            f"--seeds-per-theta must be a whole number of at least 1 (1: every simulation draws "
+            f"its own θ), got {seeds_per_theta!r}"
+        )
+
+
+def _clip_changes(
+    n_frames: int | None, size: tuple[int, int] | None, channels: int | None
+) -> dict[str, int]:
+    """The :class:`ClipFormat` fields the overrides change."""
+    clip_changes: dict[str, int] = {}
+    if n_frames is not None:
+        clip_changes["n_frames"] = n_frames
+    if size is not None:
+        clip_changes["height"], clip_changes["width"] = size
+    if channels is not None:
+        clip_changes["channels"] = channels
+    return clip_changes
 
 
 def _scaled_renders(new_sims: int, old_sims: int, old_renders: int) -> int:
