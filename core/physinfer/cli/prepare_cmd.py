@@ -17,76 +17,88 @@ from rich.markup import escape
 
 from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
 
+# The options of ``prepare``, declared here so its signature reads as a list of settings.
+_TargetOpt = Annotated[
+    Path, typer.Option("--target", help="Video to prepare (mp4/mov/..., gif or image folder).")
+]
+_OutOpt = Annotated[
+    Path,
+    typer.Option(
+        "--out",
+        help="Prepared video (.mp4 or .gif); NAME.json and NAME_overlay.png go beside it.",
+    ),
+]
+_OverwriteOpt = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace --out, NAME.json and NAME_overlay.png when they exist (by default any "
+        "of them existing is refused before the video is read).",
+    ),
+]
+_RoiOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--roi",
+        help="x,y,w,h in the input's pixels: the region the subject moves in, instead of the one "
+        "found (framed by the same rule).",
+    ),
+]
+_FpsOpt = Annotated[
+    float | None,
+    typer.Option("--fps", help="Frame rate of --target, when the file does not say."),
+]
+_EmbedderOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--embedder",
+        help="Embedder whose frame rate and input size to prepare for (default: the plugin's).",
+    ),
+]
+_SizeOpt = Annotated[
+    int | None,
+    typer.Option("--size", help="Side of the square output in pixels (default: the embedder's)."),
+]
+_StartOpt = Annotated[float, typer.Option("--start", help="Seconds to trim from the start.")]
+_DurationOpt = Annotated[
+    float | None,
+    typer.Option("--duration", help="Seconds to keep from --start (default: to the end)."),
+]
+_NoStabiliseOpt = Annotated[
+    bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
+]
+_NoFreezeOpt = Annotated[
+    bool,
+    typer.Option(
+        "--no-freeze-background",
+        help="Keep the noise and compression flicker of pixels that do not move (by default "
+        "they are set to their temporal median, as a renderer draws a static background).",
+    ),
+]
+_NoRenderEstimateOpt = Annotated[
+    bool,
+    typer.Option(
+        "--no-render-estimate",
+        help="Do not estimate the camera's render parameters (ζ) from the prepared clip.",
+    ),
+]
+
 
 @handle_errors()
 def prepare_cmd(
     plugin: PluginOpt,
-    target: Annotated[
-        Path, typer.Option("--target", help="Video to prepare (mp4/mov/..., gif or image folder).")
-    ],
-    out: Annotated[
-        Path,
-        typer.Option(
-            "--out",
-            help="Prepared video (.mp4 or .gif); NAME.json and NAME_overlay.png go beside it.",
-        ),
-    ],
-    overwrite: Annotated[
-        bool,
-        typer.Option(
-            "--overwrite",
-            help="Replace --out, NAME.json and NAME_overlay.png when they exist (by default any "
-            "of them existing is refused before the video is read).",
-        ),
-    ] = False,
-    roi: Annotated[
-        str | None,
-        typer.Option(
-            "--roi",
-            help="x,y,w,h in the input's pixels: the region the subject moves in, instead of the one "
-            "found (framed by the same rule).",
-        ),
-    ] = None,
-    fps: Annotated[
-        float | None,
-        typer.Option("--fps", help="Frame rate of --target, when the file does not say."),
-    ] = None,
-    embedder: Annotated[
-        str | None,
-        typer.Option(
-            "--embedder",
-            help="Embedder whose frame rate and input size to prepare for (default: the plugin's).",
-        ),
-    ] = None,
-    size: Annotated[
-        int | None,
-        typer.Option(
-            "--size", help="Side of the square output in pixels (default: the embedder's)."
-        ),
-    ] = None,
-    start: Annotated[float, typer.Option("--start", help="Seconds to trim from the start.")] = 0.0,
-    duration: Annotated[
-        float | None,
-        typer.Option("--duration", help="Seconds to keep from --start (default: to the end)."),
-    ] = None,
-    no_stabilise: Annotated[
-        bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
-    ] = False,
-    no_freeze: Annotated[
-        bool,
-        typer.Option(
-            "--no-freeze-background",
-            help="Keep the noise and compression flicker of pixels that do not move (by default "
-            "they are set to their temporal median, as a renderer draws a static background).",
-        ),
-    ] = False,
-    no_render_estimate: Annotated[
-        bool,
-        typer.Option(
-            "--no-render-estimate",
-            help="Do not estimate the camera's render parameters (ζ) from the prepared clip.",
-        ),
-    ] = False,
+    target: _TargetOpt,
+    out: _OutOpt,
+    overwrite: _OverwriteOpt = False,
+    roi: _RoiOpt = None,
+    fps: _FpsOpt = None,
+    embedder: _EmbedderOpt = None,
+    size: _SizeOpt = None,
+    start: _StartOpt = 0.0,
+    duration: _DurationOpt = None,
+    no_stabilise: _NoStabiliseOpt = False,
+    no_freeze: _NoFreezeOpt = False,
+    no_render_estimate: _NoRenderEstimateOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
@@ -99,23 +111,29 @@ def prepare_cmd(
     if as_json:
         emit_json(video.to_dict())
         return
-    result, size = video.prepared, video.clip.size[0]
-    x, y, w, h = result.box
-    err_console.print(
-        f"{result.roi_source} box x={x:.0f} y={y:.0f} w={w:.0f} h={h:.0f}; shake {result.shake_rms_px:.2f} px rms "
-        f"({'removed, residual ' + format(result.residual_rms_px, '.2f') + ' px' if result.stabilised else 'left'}); "
-        f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {size}×{size}",
-        highlight=False,
-    )
-    if video.render_estimate is not None:
-        err_console.print(render_estimate_line(video.render_estimate), highlight=False)
-    for warning in result.warnings:
-        err_console.print(f"[yellow]warning:[/] {escape(warning)}", highlight=False)
+    for line in prepared_lines(video):
+        err_console.print(line, highlight=False)
     err_console.print(
         f"wrote {video.paths['video']}, {video.paths['json']}, {video.paths['overlay']} (check the box)",
         markup=False,
         highlight=False,
     )
+
+
+def prepared_lines(video: Any) -> list[str]:
+    """What ``prepare`` prints (without ``--json``), as rich markup: the box found, the shake
+    and the frames kept; the estimated render parameters; the warnings."""
+    result, size = video.prepared, video.clip.size[0]
+    x, y, w, h = result.box
+    lines = [
+        f"{result.roi_source} box x={x:.0f} y={y:.0f} w={w:.0f} h={h:.0f}; shake {result.shake_rms_px:.2f} px rms "
+        f"({'removed, residual ' + format(result.residual_rms_px, '.2f') + ' px' if result.stabilised else 'left'}); "
+        f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {size}×{size}"
+    ]
+    if video.render_estimate is not None:
+        lines.append(render_estimate_line(video.render_estimate))
+    lines += [f"[yellow]warning:[/] {escape(warning)}" for warning in result.warnings]
+    return lines
 
 
 def render_estimate_line(estimate: dict[str, Any]) -> str:
