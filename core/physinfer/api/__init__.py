@@ -190,7 +190,7 @@ def refine(
             ``fix``, ``render_set``, ``out``, ``resume``, ...).
 
     Returns:
-        The :class:`~physinfer.loop.RefineResult`: ``best_params``, ``posterior`` (the
+        The :class:`~physinfer.refinement.RefineResult`: ``best_params``, ``posterior`` (the
         90 % intervals and identifiability labels, when an estimator applies), the files
         written to ``run_dir``, ``to_dict()`` and ``plot()``.
     """

@@ -1,6 +1,6 @@
 """Result objects of the API that have no home in the layers below it.
 
-:class:`~physinfer.loop.RefineResult` (``refine``) and
+:class:`~physinfer.refinement.RefineResult` (``refine``) and
 :class:`~physinfer.posterior.workflow.PosteriorReport` (``infer``) are the loop's own
 results; a simulation and a diagnosis get theirs here. Each has ``to_dict()`` (the JSON
 the CLI prints) and ``plot()`` (a matplotlib figure).
