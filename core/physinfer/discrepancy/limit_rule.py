@@ -184,6 +184,45 @@ def effect_limit(
     space: ParameterSpace = probe.base.simulator.parameter_space
     u0 = space.to_unit(space.complete(theta))
     floor_gap = pairwise_median(base_embeddings)
+    rungs = _predicted_rungs(ladder, base_embeddings, jac, u0, keep, threshold, floor_gap)
+    refitter = _Refitter(
+        probe, ladder, rungs, RefitState(jac.copy(), u0, base_embeddings), u0, base_embeddings, seeds,
+        mode=measure, keep=keep, log=refits,
+    )  # fmt: skip
+    order = range(len(rungs)) if measure == "all" else [len(rungs) - 1]
+    for i in order:
+        refitter.measure(i)
+    fraction = _settled_limit(ladder.fractions, rungs, floor_gap, refitter)
+    reason, mimicked_by = None, []
+    if fraction is None:
+        reason, mimicked_by = _why_not(rungs[-1], space, jac, threshold.at(), floor_gap)
+    detectable = None if fraction is None else moved_values(effect_space, fraction)
+    return {
+        "detectable_from": detectable,
+        "fraction": fraction,
+        "reason": reason,
+        "mimicked_by": mimicked_by,
+        "rungs": [
+            {
+                **{k: v for k, v in r.items() if k != "delta"},
+                "refit_step": {n: float(d) for n, d in zip(space.names, r["delta"], strict=True)},
+            }
+            for r in rungs
+        ],
+    }
+
+
+def _predicted_rungs(
+    ladder: Ladder,
+    base_embeddings: np.ndarray,
+    jac: np.ndarray,
+    u0: np.ndarray,
+    keep: Sequence[bool] | None,
+    threshold: Threshold,
+    floor_gap: float,
+) -> list[dict[str, Any]]:
+    """Each rung with its shift from θ̂, its floor, its threshold and the refit the Jacobian
+    predicts (``measured`` False: :class:`_Refitter` replaces it by a measured one)."""
     # A rung's floor is one pair of clips or a few: it counts as its own noise only beyond the
     # spread of θ̂'s (its 95th percentile), or a deterministic effect's threshold would rise by chance.
     base_pairs = pairwise(base_embeddings)
@@ -204,72 +243,84 @@ def effect_limit(
                 "delta": delta,
             }
         )
-    taus = [r["threshold"] for r in rungs]
+    return rungs
 
-    state = RefitState(jac.copy(), u0, base_embeddings)
-    # A deterministic rung is one simulation per point: search more (see measured_refit).
-    multipliers, polish = ((1.0, 1.5, 2.0, 3.0), 2) if measure == "all" else ((1.0, 2.0), 1)
-    replay = list(refits.entries) if refits is not None else []
-    done: list[int] = []  # the rungs this call measured, in order
 
-    def measure_rung(i: int) -> None:
-        r = rungs[i]
-        if r["measured"] or measure == "none":
+@dataclass
+class _Refitter:
+    """Measures rungs' refits, each from the state the earlier ones left, in the order asked.
+
+    A refit is taken from ``log`` (an earlier call's, see :func:`effect_limit`) as long as
+    this one measures the rungs in the order that one did; this call's own are appended to it.
+
+    Attributes:
+        mode: ``"all"``, ``"key"`` or ``"none"`` (nothing is measured).
+        done: The rungs measured, in order.
+    """
+
+    probe: Probe
+    ladder: Ladder
+    rungs: list[dict[str, Any]]
+    state: RefitState
+    u0: np.ndarray
+    base_embeddings: np.ndarray
+    seeds: Sequence[int]
+    mode: str
+    keep: Sequence[bool] | None = None
+    log: RefitLog | None = None
+    done: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._replay = list(self.log.entries) if self.log is not None else []
+        # A deterministic rung is one simulation per point: search more (see measured_refit).
+        self._multipliers, self._polish = ((1.0, 1.5, 2.0, 3.0), 2) if self.mode == "all" else ((1.0, 2.0), 1)
+
+    def measure(self, i: int) -> None:
+        """Measure rung ``i``'s refit (once), keeping the predicted one where it was no better
+        than the shift itself."""
+        r = self.rungs[i]
+        if r["measured"] or self.mode == "none":
             return
-        k = len(done)
+        k, done, replay = len(self.done), self.done, self._replay
         if k < len(replay) and replay[k][0] == i and [e[0] for e in replay[:k]] == done:
             _, gap, u, jac_after, u_after, emb_after = replay[k]
-            state.jac, state.u, state.emb = jac_after.copy(), u_after, emb_after
+            self.state.jac, self.state.u, self.state.emb = jac_after.copy(), u_after, emb_after
         else:
             gap, u = measured_refit(
-                probe, ladder.embeddings[i], state, (u0, base_embeddings), r["delta"], seeds,
-                multipliers=multipliers, polish=polish, keep=keep,
+                self.probe, self.ladder.embeddings[i], self.state, (self.u0, self.base_embeddings), r["delta"],
+                self.seeds, multipliers=self._multipliers, polish=self._polish, keep=self.keep,
             )  # fmt: skip
-            if refits is not None and [e[0] for e in refits.entries] == done:
-                refits.entries.append((i, gap, u, state.jac.copy(), state.u, state.emb))
+            if self.log is not None and [e[0] for e in self.log.entries] == done:
+                self.log.entries.append((i, gap, u, self.state.jac.copy(), self.state.u, self.state.emb))
         done.append(i)
         if gap < r["shift"]:
-            r.update(refit_gap=gap, delta=u - u0)
+            r.update(refit_gap=gap, delta=u - self.u0)
         else:
-            r.update(refit_gap=r["shift"], delta=np.zeros_like(u0))
+            r.update(refit_gap=r["shift"], delta=np.zeros_like(self.u0))
         r["measured"] = True
 
-    order = range(len(rungs)) if measure == "all" else [len(rungs) - 1]
-    for i in order:
-        measure_rung(i)
+
+def _settled_limit(
+    fractions: Sequence[float], rungs: list[dict[str, Any]], floor_gap: float, refitter: _Refitter
+) -> float | None:
+    """The limit, with both rungs around it measured: measuring a rung may move the limit up,
+    so it is read again until it settles (at most once per rung)."""
+    taus = [r["threshold"] for r in rungs]
     fraction = None
-    for _ in range(len(rungs)):  # measuring a rung may move the limit up: settle it
-        fraction = interpolate_limit(
-            ladder.fractions, [r["refit_gap"] for r in rungs], floor_gap, taus
-        )
+    for _ in range(len(rungs)):
+        fraction = interpolate_limit(fractions, [r["refit_gap"] for r in rungs], floor_gap, taus)
         if fraction is None:
             break
-        i = next(i for i, f in enumerate(ladder.fractions) if f >= fraction - 1e-12)
+        i = next(i for i, f in enumerate(fractions) if f >= fraction - 1e-12)
         # Both rungs around the limit: between a measured and a predicted refit the limit
         # depends on how far the prediction is off, which changes from one clip length to
         # another (the jittery pendulum's 1.6-s clip came out below its 3.2-s one).
         bracket = [j for j in (i - 1, i) if j >= 0 and not rungs[j]["measured"]]
-        if not bracket or measure == "none":
+        if not bracket or refitter.mode == "none":
             break
         for j in bracket:
-            measure_rung(j)
-    reason, mimicked_by = None, []
-    if fraction is None:
-        reason, mimicked_by = _why_not(rungs[-1], space, jac, threshold.at(), floor_gap)
-    detectable = None if fraction is None else moved_values(effect_space, fraction)
-    return {
-        "detectable_from": detectable,
-        "fraction": fraction,
-        "reason": reason,
-        "mimicked_by": mimicked_by,
-        "rungs": [
-            {
-                **{k: v for k, v in r.items() if k != "delta"},
-                "refit_step": {n: float(d) for n, d in zip(space.names, r["delta"], strict=True)},
-            }
-            for r in rungs
-        ],
-    }
+            refitter.measure(j)
+    return fraction
 
 
 def _why_not(
