@@ -30,6 +30,29 @@ def plugins_cmd(
 
     registry, infos = registry_and_infos()
     check_references(registry, infos)
+    rows = _plugin_rows(registry, infos)
+    for r in rows:  # in full on stderr (the table's cells may be cut to the terminal's width)
+        if r["error"] or r["unresolved"] or r["refused"]:
+            status = _plugin_status(r["error"], r["unresolved"], r["refused"])
+            err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
+    if as_json:
+        emit_json(
+            {
+                "plugins": rows,
+                "phenomena": sorted(registry.entries["phenomena"]),
+                "scene_settings": _scene_settings(registry),
+            }
+        )
+        return
+    Console().print(_plugins_table(rows))
+    if verbose:
+        for name, info in infos.items():
+            if info.traceback:
+                err_console.print(f"[bold]{name}[/]\n{info.traceback}", highlight=False)
+
+
+def _plugin_rows(registry: Any, infos: dict[str, Any]) -> list[dict[str, Any]]:
+    """A row per plugin, by name: where it comes from, what it provides, what failed."""
     rows = []
     for name, info in sorted(infos.items()):
         provided = registry.by_plugin(name)
@@ -49,19 +72,11 @@ def plugins_cmd(
                 "refused": info.refused,
             }
         )
-    for r in rows:  # in full on stderr (the table's cells may be cut to the terminal's width)
-        if r["error"] or r["unresolved"] or r["refused"]:
-            status = _plugin_status(r["error"], r["unresolved"], r["refused"])
-            err_console.print(f"plugin {r['name']!r}: {status}", highlight=False)
-    if as_json:
-        emit_json(
-            {
-                "plugins": rows,
-                "phenomena": sorted(registry.entries["phenomena"]),
-                "scene_settings": _scene_settings(registry),
-            }
-        )
-        return
+    return rows
+
+
+def _plugins_table(rows: list[dict[str, Any]]) -> Any:
+    """The table ``physinfer plugins`` prints (a rich ``Table``)."""
     from rich.table import Table
 
     table = Table(title="physinfer plugins")
@@ -85,11 +100,7 @@ def plugins_cmd(
             ", ".join(r["effects"]),
             _plugin_status(r["error"], r["unresolved"], r["refused"]),
         )
-    Console().print(table)
-    if verbose:
-        for name, info in infos.items():
-            if info.traceback:
-                err_console.print(f"[bold]{name}[/]\n{info.traceback}", highlight=False)
+    return table
 
 
 def _scene_settings(registry: Any) -> dict[str, list[dict[str, Any]]]:
