@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.markup import escape
 
-from physinfer.cli.app import SceneSetOpt, emit_json, handle_errors
+from physinfer.cli.app import JsonOpt, SceneSetOpt, emit_json, handle_errors
 from physinfer.errors import UserInputError
 
 if TYPE_CHECKING:
@@ -34,61 +34,81 @@ def dataset_group() -> None:
     """Generate training datasets of simulated, rendered clips (see docs/datasets.md)."""
 
 
+# The options of ``dataset generate``, declared here so its signature reads as a list of settings.
+_PluginOpt = Annotated[
+    str, typer.Option("--plugin", "-p", help="Phenomenon to simulate (see `physinfer plugins`).")
+]
+_OutOpt = Annotated[Path, typer.Option("--out", help="Dataset directory; re-running on it resumes.")]
+_PresetOpt = Annotated[str, typer.Option("--preset", help="Size preset: cpu, paper, or the plugin's.")]
+_SimsOpt = Annotated[
+    str | None,
+    typer.Option("--sims", help="Simulations: a total N (split like the preset) or TRAIN,VAL,TEST."),
+]
+_RendersPerSimOpt = Annotated[
+    str | None, typer.Option("--renders-per-sim", help="Renders per simulation: M or TRAIN,VAL,TEST.")
+]
+_FramesOpt = Annotated[int | None, typer.Option("--frames", help="Frames per stored clip.")]
+_SizeOpt = Annotated[str | None, typer.Option("--size", help="Stored clip size: N or HxW pixels.")]
+_RgbOpt = Annotated[
+    bool,
+    typer.Option(
+        "--rgb/--gray",
+        help="Store RGB clips (the default: videos arrive in colour) or grayscale (a third of the disk; "
+        "for the SDN's contrastive training, which reads grayscale).",
+    ),
+]
+_SimsPerUnitOpt = Annotated[
+    int | None, typer.Option("--sims-per-unit", help="Simulations batched per work unit (one shard).")
+]
+_SeedsPerThetaOpt = Annotated[
+    int | None,
+    typer.Option(
+        "--seeds-per-theta",
+        help="Consecutive simulations sharing one θ with different simulator seeds (default 1: "
+        "every simulation its own θ); gives positives across seeds for `train --positives parameters`.",
+    ),
+]
+_WorkersOpt = Annotated[
+    int | None, typer.Option("--workers", help="Local worker processes (default: CPU count; 0: this process).")
+]
+_SchedulerOpt = Annotated[
+    str | None, typer.Option("--scheduler", help="Dask scheduler address; its workers must share --out.")
+]
+_SeedOpt = Annotated[int, typer.Option("--seed", help="Dataset seed: same seed, same data.")]
+_SceneRangeOpt = Annotated[
+    list[str],
+    typer.Option(
+        "--scene-range",
+        help="Vary a numeric scene setting across the dataset: NAME=LOW:HIGH (repeatable), drawn "
+        "per simulation (log-uniform for positive ranges); an estimator trained on it takes the "
+        "setting as an input (`--scene-set` at inference), e.g. flag_length=0.9:3.",
+    ),
+]
+_VerifyOpt = Annotated[
+    bool, typer.Option("--verify/--no-verify", help="On resume, check every checksum (reads all data).")
+]
+
+
 @dataset_app.command("generate")
 @handle_errors(interrupted="interrupted; finished units are saved: run the same command again to resume")
 def generate_cmd(
-    plugin: Annotated[str, typer.Option("--plugin", "-p", help="Phenomenon to simulate (see `physinfer plugins`).")],
-    out: Annotated[Path, typer.Option("--out", help="Dataset directory; re-running on it resumes.")],
-    preset: Annotated[str, typer.Option("--preset", help="Size preset: cpu, paper, or the plugin's.")] = "cpu",
-    sims: Annotated[
-        str | None,
-        typer.Option("--sims", help="Simulations: a total N (split like the preset) or TRAIN,VAL,TEST."),
-    ] = None,
-    renders_per_sim: Annotated[
-        str | None, typer.Option("--renders-per-sim", help="Renders per simulation: M or TRAIN,VAL,TEST.")
-    ] = None,
-    frames: Annotated[int | None, typer.Option("--frames", help="Frames per stored clip.")] = None,
-    size: Annotated[str | None, typer.Option("--size", help="Stored clip size: N or HxW pixels.")] = None,
-    rgb: Annotated[
-        bool,
-        typer.Option(
-            "--rgb/--gray",
-            help="Store RGB clips (the default: videos arrive in colour) or grayscale (a third of the disk; "
-            "for the SDN's contrastive training, which reads grayscale).",
-        ),
-    ] = True,
-    sims_per_unit: Annotated[
-        int | None, typer.Option("--sims-per-unit", help="Simulations batched per work unit (one shard).")
-    ] = None,
-    seeds_per_theta: Annotated[
-        int | None,
-        typer.Option(
-            "--seeds-per-theta",
-            help="Consecutive simulations sharing one θ with different simulator seeds (default 1: "
-            "every simulation its own θ); gives positives across seeds for `train --positives parameters`.",
-        ),
-    ] = None,
-    workers: Annotated[
-        int | None, typer.Option("--workers", help="Local worker processes (default: CPU count; 0: this process).")
-    ] = None,
-    scheduler: Annotated[
-        str | None, typer.Option("--scheduler", help="Dask scheduler address; its workers must share --out.")
-    ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Dataset seed: same seed, same data.")] = 0,
+    plugin: _PluginOpt,
+    out: _OutOpt,
+    preset: _PresetOpt = "cpu",
+    sims: _SimsOpt = None,
+    renders_per_sim: _RendersPerSimOpt = None,
+    frames: _FramesOpt = None,
+    size: _SizeOpt = None,
+    rgb: _RgbOpt = True,
+    sims_per_unit: _SimsPerUnitOpt = None,
+    seeds_per_theta: _SeedsPerThetaOpt = None,
+    workers: _WorkersOpt = None,
+    scheduler: _SchedulerOpt = None,
+    seed: _SeedOpt = 0,
     scene_set: SceneSetOpt = [],  # noqa: B006
-    scene_range: Annotated[
-        list[str],
-        typer.Option(
-            "--scene-range",
-            help="Vary a numeric scene setting across the dataset: NAME=LOW:HIGH (repeatable), drawn "
-            "per simulation (log-uniform for positive ranges); an estimator trained on it takes the "
-            "setting as an input (`--scene-set` at inference), e.g. flag_length=0.9:3.",
-        ),
-    ] = [],  # noqa: B006
-    verify: Annotated[
-        bool, typer.Option("--verify/--no-verify", help="On resume, check every checksum (reads all data).")
-    ] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")] = False,
+    scene_range: _SceneRangeOpt = [],  # noqa: B006
+    verify: _VerifyOpt = True,
+    as_json: JsonOpt = False,
 ) -> None:
     """Simulate, render and store a dataset with train/val/test splits; resumes an interrupted run."""
     result = _generate(
@@ -136,22 +156,11 @@ def _generate(
 ) -> GenerateResult:
     from physinfer.datasets import generate_dataset, generator_for, parse_split_counts
     from physinfer.plugins import load_registry
-    from physinfer.scene import (
-        bind_scene,
-        parse_scene_ranges,
-        parse_scene_set,
-        resolve_scene,
-        scene_text,
-    )
+    from physinfer.scene import bind_scene
 
     registry, _infos = load_registry()
     phenomenon = registry.phenomenon(plugin)
-    given = parse_scene_set(scene_set)
-    scene = resolve_scene(phenomenon, given)
-    ranges = parse_scene_ranges(phenomenon, scene_range)
-    both = sorted(set(ranges) & set(given))
-    if both:
-        raise UserInputError(f"{', '.join(both)}: given both --scene-set and --scene-range; give one")
+    scene, ranges = _scene_and_ranges(phenomenon, scene_set, scene_range)
     generator = generator_for(bind_scene(phenomenon, scene), scene_ranges=ranges)
     chosen = _choose_preset(generator.presets(), preset_name, plugin)
     chosen = chosen.with_overrides(
@@ -165,15 +174,7 @@ def _generate(
         channels=3 if rgb else 1,
         seeds_per_theta=seeds_per_theta,
     )
-    sharing = f", {chosen.seeds_per_theta} seeds per θ" if chosen.seeds_per_theta > 1 else ""
-    where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
-    _stderr(
-        f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
-        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing}"
-        f"{f', scene {scene_text(scene)}' if scene else ''}"
-        f"{''.join(f', {k} {a:g}..{b:g}' for k, (a, b) in ranges.items())} "
-        f"→ {out} ({where})"
-    )
+    _stderr(_plan_line(plugin, chosen, scene, ranges, out, workers, scheduler))
     with _RichProgress() as progress:
         return generate_dataset(
             generator,
@@ -185,6 +186,45 @@ def _generate(
             verify=verify,
             progress=progress,
         )
+
+
+def _scene_and_ranges(
+    phenomenon: Any, scene_set: list[str], scene_range: Sequence[str]
+) -> tuple[Any, dict[str, tuple[float, float]]]:
+    """The scene ``--scene-set`` gives and the settings ``--scene-range`` varies; refused when
+    a setting is given both ways."""
+    from physinfer.scene import parse_scene_ranges, parse_scene_set, resolve_scene
+
+    given = parse_scene_set(scene_set)
+    scene = resolve_scene(phenomenon, given)
+    ranges = parse_scene_ranges(phenomenon, scene_range)
+    both = sorted(set(ranges) & set(given))
+    if both:
+        raise UserInputError(f"{', '.join(both)}: given both --scene-set and --scene-range; give one")
+    return scene, ranges
+
+
+def _plan_line(
+    plugin: str,
+    chosen: DatasetPreset,
+    scene: Any,
+    ranges: dict[str, tuple[float, float]],
+    out: Path,
+    workers: int | None,
+    scheduler: str | None,
+) -> str:
+    """What is about to be made, of what, where, and by whom (printed before the work starts)."""
+    from physinfer.scene import scene_text
+
+    sharing = f", {chosen.seeds_per_theta} seeds per θ" if chosen.seeds_per_theta > 1 else ""
+    where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
+    return (
+        f"{plugin}: {chosen.sims.total} simulations, {chosen.renders.total} renders "
+        f"({_splits_text(chosen)}), clips {'×'.join(map(str, chosen.clip.shape))} at {chosen.clip.fps:g} fps{sharing}"
+        f"{f', scene {scene_text(scene)}' if scene else ''}"
+        f"{''.join(f', {k} {a:g}..{b:g}' for k, (a, b) in ranges.items())} "
+        f"→ {out} ({where})"
+    )
 
 
 def _choose_preset(presets: dict[str, DatasetPreset] | Any, name: str, plugin: str) -> DatasetPreset:
