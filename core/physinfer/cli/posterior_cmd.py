@@ -39,6 +39,7 @@ PosteriorOpt = Annotated[
         help="Estimator file from `physinfer posterior train` (default: the plugin's shipped one).",
     ),
 ]
+SampleSeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")]
 
 
 @posterior_app.callback()
@@ -174,44 +175,53 @@ def held_out_lines(held_out: dict | None) -> list[str]:
     return lines
 
 
+# The options only ``infer`` has.
+_InferTargetOpt = Annotated[
+    Path | None, typer.Option("--target", help="Video; default: the plugin's embedded target.")
+]
+_InferTruthOpt = Annotated[
+    list[str],
+    typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval)."),
+]
+_InferSamplesOpt = Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")]
+_InferOutOpt = Annotated[
+    Path | None,
+    typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png."),
+]
+_InferOverwriteOpt = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace an earlier infer's results in --out (only those; a folder of other files "
+        "is refused).",
+    ),
+]
+_CheckOpt = Annotated[
+    bool,
+    typer.Option(
+        "--check/--no-check",
+        help="Simulate the posterior's median and say whether the model reproduces the video "
+        "(two simulations: seconds on the flag).",
+    ),
+]
+
+
 @handle_errors()
 def infer_cmd(
     plugin: PluginOpt,
-    target: Annotated[
-        Path | None, typer.Option("--target", help="Video; default: the plugin's embedded target.")
-    ] = None,
+    target: _InferTargetOpt = None,
     posterior: PosteriorOpt = None,
     fps: FpsOpt = None,
-    truth: Annotated[
-        list[str],
-        typer.Option("--truth", help="Known true value NAME=VALUE (reported beside the interval)."),
-    ] = [],  # noqa: B006
-    samples: Annotated[int, typer.Option("--samples", help="Posterior samples to draw.")] = 5000,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
-    out: Annotated[
-        Path | None,
-        typer.Option("--out", help="Directory for posterior.json, samples.npz, corner.png."),
-    ] = None,
-    overwrite: Annotated[
-        bool,
-        typer.Option(
-            "--overwrite",
-            help="Replace an earlier infer's results in --out (only those; a folder of other files "
-            "is refused).",
-        ),
-    ] = False,
+    truth: _InferTruthOpt = [],  # noqa: B006
+    samples: _InferSamplesOpt = 5000,
+    seed: SampleSeedOpt = 0,
+    out: _InferOutOpt = None,
+    overwrite: _InferOverwriteOpt = False,
     device: DeviceOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
-    check: Annotated[
-        bool,
-        typer.Option(
-            "--check/--no-check",
-            help="Simulate the posterior's median and say whether the model reproduces the video "
-            "(two simulations: seconds on the flag).",
-        ),
-    ] = True,
+    check: _CheckOpt = True,
     as_json: JsonOpt = False,
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
@@ -251,7 +261,7 @@ def calibration_cmd(
     samples: Annotated[
         int, typer.Option("--samples", help="Posterior samples per simulation.")
     ] = 1000,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the posterior samples.")] = 0,
+    seed: SampleSeedOpt = 0,
     out: Annotated[
         Path | None,
         typer.Option("--out", help="Directory for calibration.json and calibration.png."),
