@@ -12,7 +12,19 @@ class PhysinferError(Exception):
 
 
 class UserInputError(PhysinferError, ValueError):
-    """Bad input from the user: a file, an option, a parameter value."""
+    """Bad input from the user: a file, an option, a parameter value.
+
+    Args:
+        message: What was wrong (with the remedy, or without it when ``remedy`` is given).
+        remedy: How to fix it, when the caller keeps it apart: the message printed is
+            ``"{message}; {remedy}"``, and code that reports only why something does not
+            apply (``refine`` searching without a posterior) reads :attr:`reason`.
+    """
+
+    def __init__(self, message: str = "", *, remedy: str | None = None) -> None:
+        self.reason = message
+        self.remedy = remedy
+        super().__init__(f"{message}; {remedy}" if remedy else message)
 
 
 class SimulationFailed(PhysinferError, RuntimeError):

@@ -114,3 +114,13 @@ def test_a_blocked_plugins_command_under_json_is_one_json_error(tmp_path):
         error
         == "no such command 'train'; PHYSINFER_DISABLED_PLUGINS=flag blocks those plugins and their commands"
     )
+
+
+def test_a_user_error_may_keep_its_remedy_apart():
+    from physinfer.errors import UserInputError
+
+    error = UserInputError("the file is damaged", remedy="generate it again")
+    assert str(error) == "the file is damaged; generate it again"
+    assert (error.reason, error.remedy) == ("the file is damaged", "generate it again")
+    plain = UserInputError("one line; with its remedy")
+    assert (str(plain), plain.reason, plain.remedy) == ("one line; with its remedy", "one line; with its remedy", None)

@@ -147,6 +147,14 @@ def test_an_estimator_trained_across_sizes_takes_the_size_and_refuses_sizes_outs
     corners = {**default_scene(flag), "flag_length": 0.6, "flag_height": 0.4, "pinning": "corners"}
     with pytest.raises(UserInputError, match="its other settings were"):
         estimator.check_scene(flag, corners)
+    # Both sizes outside: refine's one-line note keeps the whole reason (it holds "; "), not the remedy.
+    from physinfer.posterior.infer_workflow import _first_clause
+
+    with pytest.raises(UserInputError) as refused:
+        estimator.check_scene(flag, {**default_scene(flag), "flag_length": 2.0, "flag_height": 1.0})
+    reason = _first_clause(refused.value)
+    assert "flag_height=1 (trained on 0.3..0.45); flag_length=2 (trained on 0.5..0.7)" in reason
+    assert "dataset generate" not in reason and "dataset generate" in str(refused.value)
     # Calibration runs on the held-out split with each clip's size as input.
     proc = physinfer_cli(
         "evaluate", "calibration", "--plugin", "flag", "--posterior", str(ranged_estimator),

@@ -341,15 +341,15 @@ class PosteriorEstimator:
         where = f"{path} " if path else ""
         if self.config.plugin != plugin:
             raise UserInputError(
-                f"the posterior estimator {where}was trained for --plugin {self.config.plugin}, not {plugin}; "
-                f"train one for {plugin} with `physinfer posterior train --plugin {plugin}`"
+                f"the posterior estimator {where}was trained for --plugin {self.config.plugin}, not {plugin}",
+                remedy=f"train one for {plugin} with `physinfer posterior train --plugin {plugin}`",
             )
         mine, theirs = self.parameter_space, parameter_space
         if mine.to_dict() != theirs.to_dict():
             diff = _space_difference(mine, theirs)
             raise UserInputError(
-                f"the posterior estimator {where}was trained on another parameter space ({diff}); "
-                "train one on a dataset of this model (same effects, nothing --fix'ed)"
+                f"the posterior estimator {where}was trained on another parameter space ({diff})",
+                remedy="train one on a dataset of this model (same effects, nothing --fix'ed)",
             )
 
     def check_scene(
@@ -382,8 +382,8 @@ class PosteriorEstimator:
                 return
             why = "; ".join(outside) if outside else f"its other settings were {scene_text(trained)}"
             raise UserInputError(
-                f"the posterior estimator {where}does not cover this scene ({why}); "
-                + scene_remedy(phenomenon, scene)
+                f"the posterior estimator {where}does not cover this scene ({why})",
+                remedy=scene_remedy(phenomenon, scene),
             )
         if same_scene(phenomenon, self.config.scene, scene):
             return
@@ -392,8 +392,8 @@ class PosteriorEstimator:
             for s in (self.config.scene, scene)
         )
         raise UserInputError(
-            f"the posterior estimator {where}was trained on clips of {trained}, not of {given}; "
-            + scene_remedy(phenomenon, scene)
+            f"the posterior estimator {where}was trained on clips of {trained}, not of {given}",
+            remedy=scene_remedy(phenomenon, scene),
         )
 
     def check_embedder(self, embedder: Any) -> None:

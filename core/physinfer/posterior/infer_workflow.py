@@ -20,6 +20,7 @@ from physinfer.posterior.estimator import PosteriorEstimator
 from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
 from physinfer.posterior.summary import correlations, marginals
 from physinfer.registry import Registry
+from physinfer.roles import Target
 from physinfer.threads import with_refinement_threads
 
 
@@ -179,7 +180,7 @@ def infer(
         UserInputError: a mismatched or damaged estimator (another scene included), a
             target too short for it, an unreadable video.
     """
-    from physinfer.pipeline import build_pipeline
+    from physinfer.scene import default_scene
     from physinfer.target import load_target
 
     if n_samples < 100:
@@ -189,46 +190,88 @@ def infer(
     out = Path(out)
     check_output_dir(out)
     t_start = time.perf_counter()
-    from physinfer.scene import default_scene, resolve_scene
+    loaded = _load_estimator(registry, plugin, posterior, device, scene_set)
+    if conditioning is not None:
+        conditioning = replace(conditioning, estimate_render=False)
+    target = load_target(
+        loaded.pipeline, target_path, fps=fps, truth=truth, render_set={}, conditioning=conditioning
+    )
+    t_ready = time.perf_counter()
+    report = posterior_of_clip(
+        loaded.estimator, loaded.pipeline.embedder, target.clip, n_samples=n_samples, seed=seed,
+        scene=loaded.scene or default_scene(loaded.phenomenon),
+    )  # fmt: skip
+    if check:
+        _check_adequacy(report, registry, plugin, loaded, target, device, seed)
+    report.estimator = loaded.path
+    report.truth = dict(target.truth) if target.truth else None
+    report.scene = loaded.scene
+    report.target_conditions = target.conditions
+    report.seconds["start_up"] = t_ready - t_start
+    write_report(report, loaded.estimator, out, title=target.description)
+    loaded.pipeline.renderer.close()
+    return report
+
+
+@dataclass(frozen=True)
+class _LoadedEstimator:
+    """The estimator ``infer`` samples, with what was resolved on the way to it.
+
+    Attributes:
+        phenomenon: The plugin's phenomenon.
+        scene: The target's complete scene (``None``: the phenomenon has no scene settings).
+        estimator: The estimator, checked against that scene.
+        path: Where it was loaded from.
+        pipeline: The pipeline of the embedder it was trained with.
+    """
+
+    phenomenon: Any
+    scene: dict[str, Any] | None
+    estimator: PosteriorEstimator
+    path: Path
+    pipeline: Any
+
+
+def _load_estimator(
+    registry: Registry,
+    plugin: str,
+    posterior: Path | None,
+    device: str | None,
+    scene_set: Mapping[str, Any] | None,
+) -> _LoadedEstimator:
+    """Resolve the scene, load the estimator, check its scene and rebuild its embedder."""
+    from physinfer.scene import resolve_scene
 
     phenomenon = registry.phenomenon(plugin)
     scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
     estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
     estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
-    if conditioning is not None:
-        conditioning = replace(conditioning, estimate_render=False)
-    target = load_target(
-        pipeline, target_path, fps=fps, truth=truth, render_set={}, conditioning=conditioning
-    )
-    t_ready = time.perf_counter()
-    report = posterior_of_clip(
-        estimator,
-        pipeline.embedder,
-        target.clip,
-        n_samples=n_samples,
-        seed=seed,
-        scene=scene or default_scene(phenomenon),
-    )
-    if check:
-        from physinfer.adequacy import predictive_check
+    return _LoadedEstimator(phenomenon, scene, estimator, path, pipeline)
 
-        median = report.space.from_unit(np.median(report.samples_unit, axis=0))
-        checked = pipeline if not scene else build_pipeline(
-            registry, plugin, embedder=estimator.config.embedder, embedder_frames=estimator.config.frames_option,
-            weights=Path(estimator.config.weights) if estimator.config.weights else None, device=device, scene_set=scene,
-        )  # fmt: skip
-        t_check = time.perf_counter()
-        report.adequacy = predictive_check(checked, median, target, seed)
-        report.seconds["check"] = time.perf_counter() - t_check
-    report.estimator = path
-    report.truth = dict(target.truth) if target.truth else None
-    report.scene = scene
-    report.target_conditions = target.conditions
-    report.seconds["start_up"] = t_ready - t_start
-    write_report(report, estimator, out, title=target.description)
-    pipeline.renderer.close()
-    return report
+
+def _check_adequacy(
+    report: PosteriorReport,
+    registry: Registry,
+    plugin: str,
+    loaded: _LoadedEstimator,
+    target: Target,
+    device: str | None,
+    seed: int,
+) -> None:
+    """Simulate the posterior's median and set ``report.adequacy`` (and its time in ``seconds``)."""
+    from physinfer.adequacy import predictive_check
+    from physinfer.pipeline import build_pipeline
+
+    median = report.space.from_unit(np.median(report.samples_unit, axis=0))
+    config = loaded.estimator.config
+    checked = loaded.pipeline if not loaded.scene else build_pipeline(
+        registry, plugin, embedder=config.embedder, embedder_frames=config.frames_option,
+        weights=Path(config.weights) if config.weights else None, device=device, scene_set=loaded.scene,
+    )  # fmt: skip
+    t_check = time.perf_counter()
+    report.adequacy = predictive_check(checked, median, target, seed)
+    report.seconds["check"] = time.perf_counter() - t_check
 
 
 def write_report(
@@ -264,8 +307,10 @@ def write_report(
 
 
 def _first_clause(exc: Exception) -> str:
-    """The reason of a refusal, without its remedy (after the first semicolon)."""
-    return str(exc).split("; ")[0]
+    """The reason of a refusal, without its remedy: a :class:`UserInputError`'s ``reason``
+    where it keeps the remedy apart, else the message up to its first semicolon."""
+    remedy = getattr(exc, "remedy", None)
+    return str(getattr(exc, "reason", "")) if remedy else str(exc).split("; ")[0]
 
 
 def trust_lines(report: PosteriorReport) -> list[str]:
