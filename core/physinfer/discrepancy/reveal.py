@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -91,6 +92,35 @@ def reveal_by_fixing(
     return out
 
 
+@dataclass(frozen=True)
+class _SettingCheck:
+    """What every "another setting" what-if of :func:`reveal_by_setting` compares against.
+
+    Attributes:
+        probe: The diagnosis' probe (the Jacobian's and the ladders' clips).
+        thresholds: The rule's threshold per effect, at the current setting.
+        effects: Each effect's limit record; a what-if that lowers it is added to its ``reveal``.
+        ladders: Each effect's rungs at the current setting.
+        augmented: Each effect's augmented pipeline.
+        theta: θ̂.
+        seeds: The baseline's seeds (the Jacobian's).
+        wanted: The effects not yet detectable at half range.
+        here: ``(n, D_e)`` θ̂'s re-simulations' embeddings at the current setting.
+        jac_here: The Jacobian at θ̂ from them.
+    """
+
+    probe: Probe
+    thresholds: Mapping[str, Threshold]
+    effects: dict[str, Any]
+    ladders: Mapping[str, Ladder]
+    augmented: Mapping[str, Any]
+    theta: Mapping[str, float]
+    seeds: Sequence[int]
+    wanted: list[str]
+    here: np.ndarray
+    jac_here: np.ndarray
+
+
 def reveal_by_setting(
     probe: Probe,
     inputs: LimitInputs,
@@ -121,66 +151,8 @@ def reveal_by_setting(
     base_trajs = probe.trajectories(inputs.base.simulator, [theta] * len(seeds), seeds)
     here = probe.embed(base_trajs)
     jac_here = jacobian_from(probe.embed(jac_trajs), here, signs, len(seeds), step)
-    zetas = [
-        (key, value)
-        for key, values in VIEW_CHANGES.items()
-        if key in inputs.render_params
-        for value in values
-        if float(inputs.render_params[key]) != value
-    ]
-
-    def limits_in(
-        emb_base: np.ndarray,
-        jac_new: np.ndarray,
-        rung_emb: Mapping[str, list[np.ndarray]],
-        change: str,
-    ) -> None:
-        ratio = pairwise_median(emb_base) / max(pairwise_median(here), 1e-300)
-        for name in wanted:
-            effect_space = inputs.augmented[name].effects[0].parameter_space
-            ladder = ladders[name]
-            now = effect_limit(
-                probe,
-                ladder,
-                theta,
-                here,
-                jac_here,
-                thresholds[name],
-                seeds,
-                effect_space=effect_space,
-                measure="none",
-            )
-            other = Ladder(ladder.fractions, ladder.values, list(rung_emb[name]), [])
-            new = effect_limit(
-                probe,
-                other,
-                theta,
-                emb_base,
-                jac_new,
-                thresholds[name].scaled(ratio),
-                seeds,
-                effect_space=effect_space,
-                measure="none",
-            )
-            factor = _improvement(now, new)
-            if factor is None or factor <= 1.05:
-                continue
-            detectable, measured_here = new["detectable_from"], effects[name]["fraction"]
-            if measured_here is None:
-                factor = math.inf
-            elif math.isfinite(factor):
-                detectable = moved_values(effect_space, measured_here / factor)
-            effects[name]["reveal"].append(
-                {
-                    "change": change,
-                    "kind": "setting",
-                    "detectable_from": detectable,
-                    "factor": _finite(factor),
-                    "measured": False,
-                }
-            )
-
-    for key, value in zetas:
+    check = _SettingCheck(probe, thresholds, effects, ladders, inputs.augmented, theta, seeds, wanted, here, jac_here)
+    for key, value in _view_changes(inputs.render_params):
         zeta = {**inputs.render_params, key: value}
         try:
             emb_base = probe.embed(base_trajs, zeta)
@@ -191,7 +163,7 @@ def reveal_by_setting(
         rungs = {
             name: [probe.embed(t, zeta) for t in ladders[name].trajectories] for name in wanted
         }
-        limits_in(emb_base, jac_new, rungs, f"--render-set {key}={value:g}")
+        _reveal_in(check, emb_base, jac_new, rungs, f"--render-set {key}={value:g}")
     seconds = next((t.vertices.shape[0] / t.fps for t in base_trajs if t is not None), None)
     if inputs.make_longer is not None and seconds is not None:
         try:
@@ -202,7 +174,66 @@ def reveal_by_setting(
             say(f"      (a longer clip is not tried: {exc})")
             return
         probe.simulations += longer[3]
-        limits_in(*longer[:3], "a clip twice as long (--duration, --embedder-frames)")
+        _reveal_in(check, *longer[:3], "a clip twice as long (--duration, --embedder-frames)")
+
+
+def _view_changes(render_params: Mapping[str, Any]) -> list[tuple[str, float]]:
+    """The camera views to try: each ζ key of :data:`VIEW_CHANGES` the target's ζ has, at another value."""
+    return [
+        (key, value)
+        for key, values in VIEW_CHANGES.items()
+        if key in render_params
+        for value in values
+        if float(render_params[key]) != value
+    ]
+
+
+def _reveal_in(
+    check: _SettingCheck,
+    emb_base: np.ndarray,
+    jac_new: np.ndarray,
+    rung_emb: Mapping[str, list[np.ndarray]],
+    change: str,
+) -> None:
+    """Add ``change`` to the ``reveal`` of each wanted effect whose limit it lowers more than 5 %.
+
+    Args:
+        check: The current setting's numbers.
+        emb_base: θ̂'s re-simulations' embeddings in the other setting.
+        jac_new: The Jacobian at θ̂ there.
+        rung_emb: Each wanted effect's rung embeddings there.
+        change: How the user would make that setting (the what-if's ``change``).
+    """
+    ratio = pairwise_median(emb_base) / max(pairwise_median(check.here), 1e-300)
+    for name in check.wanted:
+        effect_space = check.augmented[name].effects[0].parameter_space
+        ladder = check.ladders[name]
+        now = effect_limit(
+            check.probe, ladder, check.theta, check.here, check.jac_here, check.thresholds[name], check.seeds,
+            effect_space=effect_space, measure="none",
+        )  # fmt: skip
+        other = Ladder(ladder.fractions, ladder.values, list(rung_emb[name]), [])
+        new = effect_limit(
+            check.probe, other, check.theta, emb_base, jac_new, check.thresholds[name].scaled(ratio), check.seeds,
+            effect_space=effect_space, measure="none",
+        )  # fmt: skip
+        factor = _improvement(now, new)
+        if factor is None or factor <= 1.05:
+            continue
+        detectable, measured_here = new["detectable_from"], check.effects[name]["fraction"]
+        if measured_here is None:
+            factor = math.inf
+        elif math.isfinite(factor):
+            detectable = moved_values(effect_space, measured_here / factor)
+        check.effects[name]["reveal"].append(
+            {
+                "change": change,
+                "kind": "setting",
+                "detectable_from": detectable,
+                "factor": _finite(factor),
+                "measured": False,
+            }
+        )
 
 
 def _longer_clip(
