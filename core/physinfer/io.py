@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.errors import UserInputError
+
 
 def check_output_dir(path: str | Path, option: str = "--out") -> None:
     """Refuse an output directory that cannot be made, before any work starts.
@@ -27,8 +29,6 @@ def check_output_dir(path: str | Path, option: str = "--out") -> None:
     Raises:
         UserInputError: ``path`` or a folder above it is a file, or no permission to write.
     """
-    from physinfer.errors import UserInputError
-
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise UserInputError(f"{option} {path} is a file; give a directory")
@@ -69,8 +69,6 @@ def check_output_file(
         UserInputError: a wrong ending, a directory, an existing file without ``overwrite``, a
             file above it, or a folder that cannot be written.
     """
-    from physinfer.errors import UserInputError
-
     path = Path(path)
     shown = shown or f"{option} {path}"
     if suffixes and path.suffix.lower() not in suffixes:

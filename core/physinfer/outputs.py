@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from physinfer import __version__
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir
 from physinfer.locking import LOCK_FILE
@@ -149,7 +150,6 @@ class OutputFolder:
                     shutil.rmtree(target)
                 else:
                     target.unlink(missing_ok=True)
-        from physinfer import __version__
 
         atomic_write_json(
             self.path / MANIFEST_FILE,

@@ -10,6 +10,8 @@ from __future__ import annotations
 import threading
 from typing import Any
 
+from physinfer.console import err_console
+
 
 class StageProgress:
     """Rich progress bars, one per stage, added as stages report their first trial count."""
@@ -29,8 +31,6 @@ class StageProgress:
                 TextColumn,
                 TimeElapsedColumn,
             )
-
-            from physinfer.console import err_console
 
             self._bar = Progress(
                 TextColumn("{task.description:<28}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

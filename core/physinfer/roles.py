@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
 from physinfer.scene import SceneSetting
 from physinfer.types import Clip, Trajectory
@@ -83,8 +84,6 @@ class Renderer(ABC):
         Raises:
             UserInputError: naming an unknown key and the known ones, or the bad value.
         """
-        from physinfer.errors import UserInputError
-
         given = dict(render_params or {})
         known = set(self.default_render_params)
         unknown = sorted(set(given) - known) if known else []

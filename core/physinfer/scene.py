@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from physinfer.errors import UserInputError
+from physinfer.parameters import parse_assignments
+from physinfer.registry import accepts_keyword
 
 #: A complete, validated scene: every declared setting by name.
 Scene = dict[str, Any]
@@ -132,8 +134,6 @@ def parse_scene_set(items: Sequence[str]) -> dict[str, str]:
     Raises:
         UserInputError: an item without ``=`` or a name given twice.
     """
-    from physinfer.parameters import parse_assignments
-
     return parse_assignments(items, "--scene-set")
 
 
@@ -186,8 +186,6 @@ def parse_scene_ranges(phenomenon: Any, items: Sequence[str]) -> SceneRanges:
         UserInputError: a malformed item, an unknown or non-numeric setting, a range
             outside the setting's bounds or with ``LOW >= HIGH``.
     """
-    from physinfer.parameters import parse_assignments
-
     raw = parse_assignments(items, "--scene-range")
     if not raw:
         return {}
@@ -272,7 +270,6 @@ def bind_scene(phenomenon: Any, scene: Scene | None) -> Any:
     """
     if scene is None:
         return phenomenon
-    from physinfer.registry import accepts_keyword
 
     changes: dict[str, Any] = {
         "make_simulator": functools.partial(phenomenon.make_simulator, scene=dict(scene))

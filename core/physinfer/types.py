@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.io import atomic_save_npz
 
 #: Frame rates a user may give (``--fps``) or a trajectory file may record: a video is written
 #: at these faithfully (below 0.1 fps the mp4 time base rounds to 0, and was written at 24).
@@ -85,8 +86,6 @@ class Trajectory:
 
     def save(self, path: str | Path) -> None:
         """Write an NPZ with ``vertices``, ``faces``, ``fps`` and ``extra_<name>`` arrays (atomic)."""
-        from physinfer.io import atomic_save_npz
-
         arrays: dict[str, Any] = {
             "vertices": self.vertices.astype(np.float32),
             "faces": self.faces.astype(np.int32),
