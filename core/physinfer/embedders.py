@@ -20,8 +20,9 @@ import numpy as np
 
 from physinfer.errors import NothingMoves, UserInputError
 from physinfer.roles import Embedder
+from physinfer.tracking import MotionTrack, track_motion
 from physinfer.types import Clip
-from physinfer.video import prepare_for_embedding
+from physinfer.video import prepare_for_embedding, resample
 
 
 @dataclass(frozen=True)
@@ -255,12 +256,9 @@ class MotionSpectrumEmbedder(Embedder):
         c = self.config
         return 2 * len(c.widths) * c.n_freqs + c.n_segments + 2 * c.n_times
 
-    def track(self, clip: Clip, *, allow_shift: bool = False):  # noqa: ANN201 - MotionTrack, imported lazily
+    def track(self, clip: Clip, *, allow_shift: bool = False) -> MotionTrack:
         """The subject's path in ``clip`` at the embedder's frame rate and length
         (``allow_shift``: see :func:`physinfer.tracking.track_motion`)."""
-        from physinfer.tracking import track_motion
-        from physinfer.video import resample
-
         c = self.config
         clip = resample(clip, c.fps)
         if clip.n_frames < self.n_frames:

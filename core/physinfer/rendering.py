@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.errors import PhysinferError
 from physinfer.render_replay import program_cache, replay_frames
 
 
@@ -215,8 +216,6 @@ class OffscreenContext:
                 # Programs that skip uploading a uniform they hold, and the plugin's shaders.
                 self._renderer._renderer._program_cache = program_cache(self.mesh_shaders)
             except Exception as exc:
-                from physinfer.errors import PhysinferError
-
                 raise PhysinferError(
                     f"cannot create a headless OpenGL context ({type(exc).__name__}: {exc}). "
                     "Install Mesa's EGL (Debian: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri "

@@ -17,6 +17,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
+from physinfer.plugins import load_registry
 from physinfer.registry import Registry
 from physinfer.roles import Embedder, Phenomenon, Renderer, Simulator, Target
 from physinfer.testing.effects import check_effect, effects_of
@@ -130,8 +131,6 @@ def check_phenomenon(
             every installed plugin).
     """
     if registry is None:
-        from physinfer.plugins import load_registry
-
         registry, _ = load_registry()
     assert isinstance(phenomenon.parameter_space, ParameterSpace)
     simulator = phenomenon.make_simulator(())

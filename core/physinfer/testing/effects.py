@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.parameters import ParameterSpace
+from physinfer.plugins import load_registry
 from physinfer.registry import Registry, accepts_keyword, resolve
 from physinfer.roles import Effect, Phenomenon
 from physinfer.types import Trajectory
@@ -113,8 +114,6 @@ def check_effect(
         AssertionError: naming the broken promise (see the module's docstring).
     """
     if registry is None:
-        from physinfer.plugins import load_registry
-
         registry, _ = load_registry()
     effect = _build(phenomenon, name, registry)
     base_space = phenomenon.parameter_space

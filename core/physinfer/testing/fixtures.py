@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
+from physinfer.plugins import load_registry
+
 
 @pytest.fixture
 def physinfer_registry():
     """A new registry (fresh plugin manager) per test."""
-    from physinfer.plugins import load_registry
-
     registry, _infos = load_registry()
     return registry
 
