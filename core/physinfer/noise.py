@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from physinfer.errors import SimulationFailed
+from physinfer.evaluation import simulate_many, squared_distance
 
 if TYPE_CHECKING:
     from physinfer.evaluation import ClipEmbedder, Pipeline
@@ -116,8 +117,6 @@ def _embed_here(
     pipeline: Pipeline, params: Mapping[str, float], zetas: Sequence[Mapping[str, Any]], seeds: Sequence[int]
 ) -> list[np.ndarray | None]:
     """Every seed's clip made in this process (``None``: its simulation failed)."""
-    from physinfer.evaluation import simulate_many
-
     # One batch call (the flag simulates it in parallel threads); each clip is embedded on
     # its own, so the floor is bit for bit what one-at-a-time evaluation measures.
     simulated = simulate_many(pipeline.simulator, [params] * len(seeds), [int(s) for s in seeds])
@@ -153,8 +152,6 @@ def measure_noise_floor(
         ValueError: for fewer than two seeds or a ζ list of the wrong length.
         SimulationFailed: when fewer than two re-simulations succeed.
     """
-    from physinfer.evaluation import squared_distance
-
     if len(seeds) < 2:
         raise ValueError(f"a noise floor needs at least two seeds, got {len(seeds)}")
     zetas = [render_params] * len(seeds) if isinstance(render_params, Mapping) else list(render_params)

@@ -14,8 +14,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from physinfer.devices import check_device
 from physinfer.errors import PhysinferError, UserInputError
 from physinfer.evaluation import Pipeline
+from physinfer.fixed import FixedParameters, resolve_fixed, split_fixed
 from physinfer.parameters import (
     ParameterSpace,
     UnknownParameterError,
@@ -63,9 +65,6 @@ def build_pipeline(
             cannot be told, a device this machine lacks, an effect given twice, or a
             scene setting that is unknown or out of range.
     """
-    from physinfer.devices import check_device
-    from physinfer.fixed import FixedParameters, resolve_fixed
-
     device = check_device(device)  # refused here, not ignored by an embedder that needs none
     refuse_repeats(effects, "--effect")
     phenomenon = registry.phenomenon(plugin)
@@ -185,8 +184,6 @@ def full_parameter_space(pipeline: Pipeline, fixed: Sequence[str]) -> ParameterS
     holds fixed (the diagnose benchmark's ``flag_lite``) are not part of its model, so
     they are neither in a model file nor accepted by ``--truth``.
     """
-    from physinfer.fixed import split_fixed
-
     return (split_fixed(pipeline.simulator)[0] if fixed else pipeline.simulator).parameter_space
 
 
@@ -196,6 +193,4 @@ def fixed_by_user(pipeline: Pipeline, fixed: Sequence[str]) -> dict[str, float]:
     Only the wrapper ``--fix`` adds counts: a phenomenon whose own simulator holds some
     parameters fixed (the diagnose benchmark's ``flag_lite``) has not had them fixed by the user.
     """
-    from physinfer.fixed import split_fixed
-
     return split_fixed(pipeline.simulator)[1] if fixed else {}

@@ -16,6 +16,7 @@ import numpy as np
 from physinfer.errors import SimulationFailed
 from physinfer.evaluation import ClipEmbedder, Pipeline, evaluate, squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
+from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.refinement import RefineConfig, RefineResult
 from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
@@ -38,8 +39,6 @@ def observation_noise(
     the run directory, so a resumed run tells the optimizer the same); else ``None``.
     Averaging over ``seeds_per_trial`` seeds divides the spread by their square root.
     """
-    from physinfer.noise import measure_noise_floor, noise_seeds
-
     if config.noise_sem is not None:
         return config.noise_sem
     if config.noise_samples == 0:
@@ -101,8 +100,6 @@ def select_best(
         "chosen_step", "selection_s"}``, or ``None`` when fewer than two distinct
         trials succeeded or every finalist failed under a fresh seed.
     """
-    from physinfer.noise import noise_seeds
-
     finalists: list[TrialRecord] = []
     seen: set[tuple[float, ...]] = set()
     for record in sorted((r for r in records if r.distance is not None), key=lambda r: r.distance):
@@ -179,8 +176,6 @@ def final_noise_floor(
     """The noise floor at the best θ: how far its own re-simulations are from each other
     (``floor``) and from the target (``gap``); ``ratio`` near 1 means the fit is as good as
     the chaos of the phenomenon allows. ``None`` when the re-simulations fail."""
-    from physinfer.noise import measure_noise_floor, noise_seeds
-
     try:
         floor = measure_noise_floor(
             pipeline,

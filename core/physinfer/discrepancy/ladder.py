@@ -22,6 +22,7 @@ import numpy as np
 
 from physinfer.discrepancy.decide import DecisionRule
 from physinfer.evaluation import Pipeline, simulate_many, squared_distance
+from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
 
 
@@ -226,6 +227,4 @@ def run_ladder(
 
 def ladder_seeds(seed: int, n: int) -> list[int]:
     """Seeds of the ladder, apart from the diagnosis's trial and re-simulation seeds."""
-    from physinfer.noise import noise_seeds
-
     return noise_seeds(seed + 11, n, salt=0x11D)

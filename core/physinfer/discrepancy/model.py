@@ -19,6 +19,7 @@ from typing import Any
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json
 from physinfer.parameters import ParameterSpace
+from physinfer.scene import same_scene, scene_text
 
 MODEL_FORMAT = "physinfer-model/1"
 
@@ -127,8 +128,6 @@ def check_model_scene(model: ModelFile, path: Path, phenomenon: Any, scene: Mapp
         UserInputError: ``--scene-set`` names another scene than ``model.json`` records
             (no ``scene`` there: the phenomenon's defaults).
     """
-    from physinfer.scene import same_scene, scene_text
-
     fitted = model.extra.get("scene")
     if not same_scene(phenomenon, scene, fitted):
         raise UserInputError(

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.types import Clip
+
 
 def probe_clip(n_frames: int, fps: float, size: int = 96) -> Any:
     """A fixed synthetic clip (drifting, flickering blobs): the embedder fingerprint's input.
@@ -19,8 +21,6 @@ def probe_clip(n_frames: int, fps: float, size: int = 96) -> Any:
     Returns:
         A :class:`~physinfer.types.Clip` of ``n_frames`` RGB frames at ``fps``.
     """
-    from physinfer.types import Clip
-
     t = np.arange(n_frames, dtype=np.float64)[:, None, None] / fps
     yy, xx = np.mgrid[0:size, 0:size].astype(np.float64) / size
     wave = (
