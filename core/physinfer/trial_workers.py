@@ -21,6 +21,10 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+from physinfer.datasets.executors import limit_threads, open_executor
+from physinfer.evaluation import simulate_one
+from physinfer.pipeline import build_pipeline
+from physinfer.plugins import load_registry
 from physinfer.types import Clip
 
 _local = threading.local()
@@ -59,10 +63,6 @@ def worker_pipeline(spec: PipelineSpec) -> Any:
     """The simulator and renderer of ``spec`` in this worker thread, built on first use."""
     cache: dict[PipelineSpec, Any] = _local.__dict__.setdefault("pipelines", {})
     if spec not in cache:
-        from physinfer.datasets.executors import limit_threads
-        from physinfer.pipeline import build_pipeline
-        from physinfer.plugins import load_registry
-
         if spec.threads is not None:
             limit_threads(spec.threads)
         registry, _ = load_registry()
@@ -81,8 +81,6 @@ def simulate_and_render(
     A failing simulation is a property of θ and comes back as its reason; a render error
     is not and raises (in the refinement, through the future).
     """
-    from physinfer.evaluation import simulate_one
-
     pipeline = worker_pipeline(spec)
     t0 = time.perf_counter()
     trajectory, error = simulate_one(pipeline.simulator, params, seed)
@@ -137,7 +135,6 @@ def trial_workers(
     if workers is None and scheduler is None:
         yield None
         return
-    from physinfer.datasets.executors import open_executor
 
     with open_executor(workers=workers, scheduler=scheduler, threads_per_worker=spec.threads or 1) as (
         executor,

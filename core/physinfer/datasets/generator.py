@@ -26,6 +26,7 @@ from physinfer.errors import UserInputError
 from physinfer.parameters import ParameterSpace
 from physinfer.registry import accepts_keyword, resolve
 from physinfer.roles import Effect, Params, Phenomenon, Renderer, Simulator
+from physinfer.scene import bind_scene, resolve_scene, sample_scene, scene_of
 from physinfer.types import Clip, Trajectory
 
 
@@ -71,7 +72,6 @@ class DatasetGenerator(ABC):
         """
         if not self.scene_ranges:
             return None
-        from physinfer.scene import sample_scene
 
         return sample_scene(rng, self.scene_ranges)
 
@@ -179,8 +179,6 @@ class PhenomenonDatasetGenerator(DatasetGenerator):
         follow one another and share it.
         """
         import json
-
-        from physinfer.scene import bind_scene, resolve_scene, scene_of
 
         key = json.dumps(dict(scene), sort_keys=True)
         if self._scene_variant is not None and self._scene_variant[0] == key:

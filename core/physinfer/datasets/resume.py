@@ -28,6 +28,7 @@ from physinfer.datasets.storage import (
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.locking import LOCK_FILE
+from physinfer.scene import scene_of
 
 
 class GenerateProgress(Protocol):
@@ -46,8 +47,6 @@ def dataset_config(generator: DatasetGenerator, preset: DatasetPreset, seed: int
     ``scene`` (``dataset generate --scene-set``) and ``scene_ranges`` (``--scene-range``)
     are recorded only when given, so datasets made before scenes existed still resume.
     """
-    from physinfer.scene import scene_of
-
     described = preset.to_dict()
     described.pop("description")
     config: dict[str, Any] = {

@@ -30,6 +30,7 @@ from physinfer.datasets.storage import file_digest, npz_digest, shard_relpath, t
 from physinfer.errors import PhysinferError, SimulationFailed
 from physinfer.io import atomic_path, to_jsonable
 from physinfer.types import Clip, Trajectory
+from physinfer.video import center_crop_resize, resample, to_gray
 
 _local = threading.local()
 
@@ -209,8 +210,6 @@ def to_stored(clip: Clip, fmt: ClipFormat) -> np.ndarray:
     Raises:
         PhysinferError: when the clip is too short for ``fmt.n_frames``.
     """
-    from physinfer.video import center_crop_resize, resample, to_gray
-
     resampled = resample(clip, fmt.fps)
     if resampled.n_frames < fmt.n_frames:
         raise PhysinferError(
