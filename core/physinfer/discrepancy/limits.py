@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.discrepancy.clip_jobs import concurrently
 from physinfer.discrepancy.ladder import (
     Ladder,
     LimitInputs,
@@ -176,8 +177,6 @@ def detection_limits(
         ``seeds``, ``refit_seeds``, ``deterministic``, ``simulations`` (the ladder's),
         ``diagnosis_simulations``, ``share``, ``config``, ``clip_seconds``, ``wall_time_s``.
     """
-    from physinfer.discrepancy.clip_jobs import concurrently
-
     say = log or (lambda _msg: None)
     start = time.perf_counter()
     probe = Probe(inputs.base, inputs.render_params)
@@ -191,50 +190,17 @@ def detection_limits(
     space: ParameterSpace = inputs.base.simulator.parameter_space
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
     keep = config.reveal  # another view's what-if re-renders the clips
-
-    def jacobian_with(p: Probe) -> tuple[np.ndarray, list[Any], Probe]:
-        return (*jacobian(p, theta, base_emb, refit_seeds, config.step), p)
-
-    found = concurrently(jacobian_with, [pooled(keep)], ["the Jacobian"], say)[0] if pooled else None
-    jac, jac_trajs, jac_probe = found or jacobian_with(probe)
-    if jac_probe is not probe:
-        probe.simulations += jac_probe.simulations
-    seconds = jac_probe.clip_seconds
-
-    def thresholds_at(scale: float) -> dict[str, Threshold]:
-        return {
-            name: Threshold.of(
-                scale, len(pipeline.effects[0].parameter_space), inputs.rule, inputs.candidates,
-                inputs.floor_samples,
-            )  # fmt: skip
-            for name, pipeline in inputs.augmented.items()
-        }
-
-    thresholds = thresholds_at(inputs.scale)
-    low = thresholds_at(inputs.scale_low) if inputs.scale_low is not None else {}
+    jac, jac_trajs, seconds = _shared_jacobian(probe, pooled, keep, theta, base_emb, refit_seeds, config.step, say)
+    thresholds = _thresholds_at(inputs, inputs.scale)
+    low = _thresholds_at(inputs, inputs.scale_low) if inputs.scale_low is not None else {}
     tasks = [
         EffectTask(name, theta, base_emb, jac, thresholds[name], tuple(config.fractions), tuple(seeds),
                    tuple(refit_seeds), deterministic, low.get(name))  # fmt: skip
         for name in inputs.augmented
     ]
-
-    def on_workers(task: EffectTask) -> tuple[dict[str, Any], Ladder, int]:
-        p = pooled(keep)  # type: ignore[misc] - only called with a factory
-        return (*effect_ladder(p, inputs.augmented[task.name], task), p.simulations)
-
-    # The ladders run on the workers at once; the rest (or one that failed there) run here.
-    labels = [f"{task.name}'s ladder" for task in tasks]
-    results = concurrently(on_workers, tasks, labels, say) if pooled else [None] * len(tasks)
-    for i, task in enumerate(tasks):
-        if results[i] is None:
-            before = probe.simulations
-            limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
-            results[i] = (limit, ladder, probe.simulations - before)
-        else:
-            probe.simulations += results[i][2]
-        say(f"      {task.name}: " + summary_phrase(results[i][0]))
-    effects = {task.name: limit for task, (limit, _, _) in zip(tasks, results, strict=True)}
-    ladders = {task.name: ladder for task, (_, ladder, _) in zip(tasks, results, strict=True)}
+    results = _run_ladders(probe, inputs, tasks, pooled, keep, say)
+    effects = {task.name: limit for task, (limit, _) in zip(tasks, results, strict=True)}
+    ladders = {task.name: ladder for task, (_, ladder) in zip(tasks, results, strict=True)}
     if config.reveal and not deterministic:
         reveal_by_setting(
             probe, inputs, config.step, thresholds, effects, ladders, theta, refit_seeds,
@@ -252,3 +218,70 @@ def detection_limits(
         "clip_seconds": seconds,
         "wall_time_s": time.perf_counter() - start,
     }
+
+
+def _shared_jacobian(
+    probe: Probe,
+    pooled: ProbeFactory | None,
+    keep: bool,
+    theta: dict[str, float],
+    base_emb: np.ndarray,
+    refit_seeds: list[int],
+    step: float,
+    say: Log,
+) -> tuple[np.ndarray, list[Any], float | None]:
+    """The baseline's Jacobian at θ̂, on the workers when ``pooled`` (here if that fails);
+    its simulations are counted on ``probe``.
+
+    Returns:
+        The Jacobian, its clips' trajectories (kept when ``keep``) and the clip's length in seconds.
+    """
+    def jacobian_with(p: Probe) -> tuple[np.ndarray, list[Any], Probe]:
+        return (*jacobian(p, theta, base_emb, refit_seeds, step), p)
+
+    found = concurrently(jacobian_with, [pooled(keep)], ["the Jacobian"], say)[0] if pooled else None
+    jac, jac_trajs, jac_probe = found or jacobian_with(probe)
+    if jac_probe is not probe:
+        probe.simulations += jac_probe.simulations
+    return jac, jac_trajs, jac_probe.clip_seconds
+
+
+def _thresholds_at(inputs: LimitInputs, scale: float) -> dict[str, Threshold]:
+    """The rule's threshold for each effect at the null scale ``scale``."""
+    return {
+        name: Threshold.of(
+            scale, len(pipeline.effects[0].parameter_space), inputs.rule, inputs.candidates,
+            inputs.floor_samples,
+        )  # fmt: skip
+        for name, pipeline in inputs.augmented.items()
+    }
+
+
+def _run_ladders(
+    probe: Probe,
+    inputs: LimitInputs,
+    tasks: list[EffectTask],
+    pooled: ProbeFactory | None,
+    keep: bool,
+    say: Log,
+) -> list[tuple[dict[str, Any], Ladder]]:
+    """Each task's limit record and ladder, in order; every ladder's simulations counted on ``probe``.
+
+    The ladders run on the workers at once when ``pooled``; the rest (or one that failed
+    there) run here, one after another.
+    """
+    def on_workers(task: EffectTask) -> tuple[dict[str, Any], Ladder, int]:
+        p = pooled(keep)  # type: ignore[misc] - only called with a factory
+        return (*effect_ladder(p, inputs.augmented[task.name], task), p.simulations)
+
+    labels = [f"{task.name}'s ladder" for task in tasks]
+    results = concurrently(on_workers, tasks, labels, say) if pooled else [None] * len(tasks)
+    for i, task in enumerate(tasks):
+        if results[i] is None:
+            before = probe.simulations
+            limit, ladder = effect_ladder(probe, inputs.augmented[task.name], task)
+            results[i] = (limit, ladder, probe.simulations - before)
+        else:
+            probe.simulations += results[i][2]
+        say(f"      {task.name}: " + summary_phrase(results[i][0]))
+    return [(limit, ladder) for limit, ladder, _ in results]
