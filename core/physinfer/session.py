@@ -1,23 +1,29 @@
-"""Run a refinement end to end: the pipeline (:mod:`physinfer.pipeline`) and target
-(:mod:`physinfer.target`), the run directory and its identity, the posterior's start, the
-loop with a progress bar, and the outputs (result files, figures, videos, the report): the
-refine command.
+"""The refine command: a refinement run end to end from its request
+(:class:`~physinfer.specs.RefineRequest`: the model, the target, the search, the execution).
 
-:mod:`physinfer.api` calls :func:`refine`; the pipeline builders and :func:`load_target` are
-re-exported here for code written before they moved to :mod:`physinfer.pipeline` and
-:mod:`physinfer.target`.
+It claims the run directory, builds the pipeline and reads the target
+(:mod:`physinfer.specs`), finds the posterior estimator and the search's start, records the
+run's identity, runs the loop (:mod:`physinfer.loop`) with a progress bar, and writes the
+outputs (result files, figures, videos, the report).
+
+:mod:`physinfer.api` calls :func:`run`; :func:`refine` takes the specs' fields as keywords.
+The pipeline builders, :func:`load_target` and :func:`default_budget` are re-exported here
+for code written before they moved to :mod:`physinfer.pipeline`, :mod:`physinfer.target` and
+:mod:`physinfer.specs`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from physinfer.adequacy import assess_fit
-from physinfer.conditioning import Conditioning
+from physinfer.discrepancy.model import ModelFile, check_model_scene
+from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
@@ -33,27 +39,200 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     naming_effects,
     target_duration,
 )
-from physinfer.refinement import RefineConfig, RefineResult
+from physinfer.posterior.refined import posterior_start, report_posterior
+from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
-from physinfer.roles import Target
-from physinfer.rundir import TARGET_FILE, RunDirectory, TrialRecord, optional_settings
+from physinfer.report import write_report_quietly
+from physinfer.roles import Optimizer, Target
+from physinfer.rundir import (
+    TARGET_FILE,
+    RunDirectory,
+    TrialRecord,
+    array_sha256,
+    optional_settings,
+    path_sha256,
+)
 from physinfer.scene import scene_of
-from physinfer.target import load_target
+from physinfer.specs import (  # default_budget re-exported: the session's historical API
+    ModelSpec,
+    RefineRequest,
+    SearchSpec,
+    default_budget,  # noqa: F401
+)
+from physinfer.target import load_target  # noqa: F401 - re-exported: the session's historical API
 from physinfer.threads import with_refinement_threads
+from physinfer.trial_workers import trial_workers
+from physinfer.video import side_by_side, write_video
+
+#: ``progress``: ``True`` for a rich bar on stderr, ``False`` for none, or a callable
+#: ``(done, total, best_distance)``.
+Progress = bool | Callable[[int, int, float], None]
 
 
-def resume_identity(target: Target, weights: Path | None) -> dict[str, Any]:
-    """The ``run.json`` entries that tie a run to its target video and embedder weights.
+@with_refinement_threads  # as run is: the command's torch work outside the loop too
+def refine(registry: Registry, *, progress: Progress = True, **settings: Any) -> RefineResult:
+    """Run or continue a refinement end to end and write every output into ``out``.
 
-    With :data:`~physinfer.rundir.IDENTITY`'s other entries they make the run's identity: a
-    ``--resume`` with another video, or other ``--weights``, is refused.
+    The keywords are the fields of the request's specs (:meth:`RefineRequest.from_keywords`):
+    ``plugin`` and ``out`` are needed; the model (:class:`~physinfer.specs.ModelSpec`:
+    ``effects``, ``fixed``, ``model``, ...), the target (:class:`~physinfer.specs.TargetSpec`:
+    ``target_path``, ``truth``, ``conditioning``, ...), the search
+    (:class:`~physinfer.specs.SearchSpec`: ``steps``, ``select_top``, ``posterior``, ...) and
+    the execution (:class:`~physinfer.specs.ExecutionSpec`: ``resume``, ``workers``, ...).
+    See :func:`run`.
     """
-    from physinfer.rundir import array_sha256, path_sha256
+    return run(registry, RefineRequest.from_keywords(**settings), progress=progress)
 
-    return {
-        "target_sha256": array_sha256(target.clip.frames, float(target.clip.fps)),
-        "weights_sha256": path_sha256(weights) if weights is not None and Path(weights).exists() else None,
-    }
+
+@with_refinement_threads
+def run(registry: Registry, request: RefineRequest, *, progress: Progress = True) -> RefineResult:
+    """Run or continue the refinement ``request`` asks for; write every output into its run directory.
+
+    A model file (``model``) switches its effects in and starts the search at its values;
+    otherwise the search starts where the video itself points (``Phenomenon.video_estimate``)
+    or at the posterior estimator's median (its intervals are reported beside the best fit,
+    ``result.json`` ``posterior``; one trained under another scene is not used and
+    ``posterior_note`` says why). With ``workers`` or ``scheduler`` each step's trials are
+    simulated and rendered there (:mod:`physinfer.trial_workers`). What the target's
+    conditioning did is recorded in ``result.json`` (``target_conditions``).
+    """
+    registry.get("optimizers", request.search.optimizer)  # fail early, listing the installed ones
+    execution, search = request.execution, request.search
+    run_dir = execution.run_directory(request.target.target_path)
+    setup = _set_up(registry, request)
+    amortized, amortized_note = _amortized_posterior(registry, setup, search)
+    budget = search.budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
+    if execution.resume:
+        _check_resumed_target(run_dir, request)
+    start = _search_start(registry, setup, search.optimizer, amortized)
+    run_info = _identity(request, setup, budget, start)
+    with exclusive_directory(execution.out):  # one writer: a second refine of this --out is refused
+        with (
+            trial_workers(
+                setup.pipeline, setup.model.worker_spec(setup.scene), workers=execution.workers,
+                scheduler=execution.scheduler,
+            ) as executor,
+            _progress(budget, enabled=progress) as on_trial,
+        ):  # fmt: skip
+            result = run_refinement(
+                setup.pipeline, setup.target, start.factory, run_dir, search.config(budget), run_info=run_info,
+                resume=execution.resume, on_trial=on_trial,
+            )  # fmt: skip
+        _report_beside(result, setup, start, (amortized, amortized_note), executor, run_dir, search.seed)
+        write_video(run_dir.path / TARGET_FILE, setup.target.clip)
+        write_outputs(result, setup.pipeline, setup.target, run_dir, search.seed)
+    setup.pipeline.renderer.close()
+    return result
+
+
+@dataclass(frozen=True)
+class _SetUp:
+    """What a refinement runs on, built from its request.
+
+    Attributes:
+        model: The model spec, completed from its model file and the target's length.
+        model_file: The model file (``None``: none given).
+        pipeline: The model's simulator, renderer and embedder.
+        scene: The resolved scene (``None``: the default).
+        fixed_values: The values ``--fix`` holds, by parameter.
+        target: The target.
+    """
+
+    model: ModelSpec
+    model_file: ModelFile | None
+    pipeline: Pipeline
+    scene: dict[str, Any] | None
+    fixed_values: dict[str, float]
+    target: Target
+
+
+def _set_up(registry: Registry, request: RefineRequest) -> _SetUp:
+    """The model (completed from its file), its pipeline, and the target read for it.
+
+    A phenomenon that takes its clip length from the target has its pipeline built again
+    for that length, unless a duration is given (or the model file has one)."""
+    model, model_file = request.model.with_model_file()
+    pipeline = model.pipeline(registry)
+    scene = scene_of(pipeline.phenomenon)
+    if model_file is not None:
+        check_model_scene(model_file, model.model_file, pipeline.phenomenon, scene)
+    fixed_values = fixed_by_user(pipeline, model.fixed)
+    search = request.search
+    # Checked before the target is read; the budget itself waits for the posterior.
+    search.config(search.budget(pipeline.phenomenon, from_posterior=False)).validate()
+    target = request.target.load(registry, pipeline, model)
+    if model.duration_s is None and (duration_s := target_duration(pipeline, target)) is not None:
+        model = replace(model, duration_s=duration_s)
+        pipeline = model.pipeline(registry)
+    return _SetUp(model, model_file, pipeline, scene, fixed_values, target)
+
+
+def _amortized_posterior(registry: Registry, setup: _SetUp, search: SearchSpec) -> tuple[Any, str | None]:
+    """The target's amortized posterior and why there is none (:func:`posterior_for_refinement`)."""
+    if not search.use_posterior:
+        return None, None
+    # Imported here: torch and sbi take seconds, and a run without an estimator needs neither.
+    from physinfer.posterior.workflow import posterior_for_refinement
+
+    return posterior_for_refinement(
+        registry, plugin=setup.model.plugin, parameter_space=setup.pipeline.simulator.parameter_space,
+        clip=setup.target.clip, posterior=search.posterior, device=setup.model.device, seed=search.seed,
+        scene=setup.scene,
+    )  # fmt: skip
+
+
+def _check_resumed_target(run_dir: RunDirectory, request: RefineRequest) -> None:
+    """Refuse to resume a run of a user's video without ``--target``."""
+    stored = run_dir.load_run_info()
+    if stored.get("target") not in (None, "default") and request.target.target_path is None:
+        raise UserInputError(
+            f"{request.execution.out} was run against --target {stored['target']}; pass the same --target"
+        )
+
+
+@dataclass(frozen=True)
+class _Start:
+    """Where the search starts.
+
+    Attributes:
+        factory: Builds the optimizer (warm-started where a start is known).
+        identity: The start's ``run.json`` entries (part of the run's identity: every
+            trial's coordinates depend on the start and the search box).
+        video_estimate: What the video told directly (``result.json`` ``video_estimate``).
+        posterior_start: The start from the posterior estimator's median, if it was one.
+    """
+
+    factory: Callable[..., Optimizer]
+    identity: dict[str, Any]
+    video_estimate: dict[str, Any] | None = None
+    posterior_start: Any = None
+
+
+def _search_start(registry: Registry, setup: _SetUp, optimizer: str, amortized: Any) -> _Start:
+    """The search's start: the model file's values, else what the video tells directly, else
+    the posterior estimator's median (with its box), else the centre."""
+    factory = registry.get("optimizers", optimizer).load()
+    space = setup.pipeline.simulator.parameter_space
+    if setup.model_file is not None:
+        start = setup.model_file.start_for(full_parameter_space(setup.pipeline, setup.model.fixed))
+        start_x = space.to_unit({name: start[name] for name in space.names})  # fixed parameters dropped
+        return _Start(warm_start_factory(factory, start_x), {"start_x": _floats(start_x)})
+    video_start = start_from_video(setup.pipeline, setup.target)
+    if video_start is not None:
+        # What the whole video tells directly (a pendulum's period over 25 s) is sharper than
+        # an estimator that reads its first seconds; the estimator's intervals are still reported.
+        start_x, box, record = video_start
+        identity = {"start": record, "search_box": [_floats(ends) for ends in box], "start_x": _floats(start_x)}
+        return _Start(warm_start_factory(factory, start_x, box), identity, video_estimate=record)
+    if amortized is not None:  # spend the budget where the video points
+        post_start = posterior_start(amortized, space)
+        identity = {
+            "start": {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical},
+            "start_x": _floats(post_start.start_x),
+            "search_box": [_floats(ends) for ends in post_start.box],
+        }
+        return _Start(warm_start_factory(factory, post_start.start_x, post_start.box), identity, None, post_start)
+    return _Start(factory, {"start_x": None})
 
 
 #: Narrowest search box per parameter, normalised (a tenth of the range).
@@ -98,227 +277,89 @@ def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict
     return centre, (lo, hi), record
 
 
-def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
-    """The trials of a refinement: ``steps`` when given; otherwise the phenomenon's default,
-    or its ``default_steps_with_posterior`` when the search starts from a posterior estimator."""
-    if steps is not None:
-        return steps
-    if from_posterior and phenomenon.default_steps_with_posterior is not None:
-        return int(phenomenon.default_steps_with_posterior)
-    return int(phenomenon.default_steps)
+def _floats(values: Any) -> list[float]:
+    return [float(v) for v in values]
 
 
-@with_refinement_threads
-def refine(
-    registry: Registry,
-    *,
-    plugin: str,
-    target_path: Path | None = None,
-    fps: float | None = None,
-    truth: Sequence[str] = (),
-    steps: int | None = None,
-    optimizer: str = "ax",
-    embedder: str | None = None,
-    weights: Path | None = None,
-    device: str | None = None,
-    effects: Sequence[str] = (),
-    model: Path | None = None,
-    render_set: Mapping[str, Any] | None = None,
-    fixed: Sequence[str] = (),
-    seed: int = 0,
-    out: Path,
-    resume: bool = False,
-    overwrite: bool = False,
-    progress: bool | Callable[[int, int, float], None] = True,
-    noise_samples: int = 3,
-    seeds_per_trial: int = 1,
-    floor_samples: int = 4,
-    select_top: int = 0,
-    select_seeds: int = 3,
-    batch_size: int = 1,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    duration_s: float | None = None,
-    embedder_frames: int | None = None,
-    posterior: Path | None = None,
-    use_posterior: bool = True,
-    scene_set: Mapping[str, Any] | None = None,
-    conditioning: Conditioning | None = None,
-) -> RefineResult:
-    """Run or continue a refinement end to end and write every output into ``out``.
-
-    ``posterior`` is an estimator file from ``physinfer posterior train`` (``None``: the
-    phenomenon's shipped one, where it applies; ``use_posterior=False``: none): the
-    target's amortized posterior is reported beside the best fit (``result.json``
-    ``posterior`` and ``correlations``) and the search starts at its median.
-
-    ``model`` is a model file written by ``physinfer diagnose``: its effects are switched
-    in and the refinement is warm-started from its values (and, unless ``duration_s`` or
-    ``fixed`` are given, simulates clips as long as the diagnosis did and holds fixed what
-    it held fixed). ``fixed`` holds parameters at
-    given values (``NAME=VALUE``, patterns allowed) and refines the rest. ``workers``
-    (local processes) or ``scheduler`` (a Dask scheduler address) simulate and render each
-    step's trials there (:mod:`physinfer.trial_workers`); by default they run here.
-    ``duration_s``, ``embedder_frames`` and ``scene_set``: see :func:`build_pipeline`; a
-    scene is recorded in ``run.json`` (a resume key) and ``result.json`` (``scene``), and a
-    posterior estimator trained under another scene is not used (``posterior_note`` says so).
-    ``conditioning``: how a ``target_path`` video is framed and its ζ estimated
-    (:mod:`physinfer.conditioning`; ``None``: used as it is); what was done is recorded in
-    ``result.json`` (``target_conditions``).
-    """
-    registry.get("optimizers", optimizer)  # fail early, listing the installed ones
-    if resume and overwrite:
-        raise UserInputError(
-            "--resume continues the run in --out and --overwrite starts it again: give one of them"
-        )
-    run_dir = RunDirectory(out)
-    run_dir.check_out(overwrite=overwrite, target=target_path)
-    model_file = None
-    if model is not None:
-        from physinfer.discrepancy.model import model_for_refine
-
-        model_file = model_for_refine(model, plugin, effects)
-        effects = model_file.effects
-        if duration_s is None:  # the clip length the model was fitted on (diagnose --duration)
-            duration_s = model_file.extra.get("duration_s")
-        if not fixed:  # the values the diagnosis held fixed (diagnose --fix)
-            fixed = [f"{name}={value!r}" for name, value in model_file.extra.get("fixed", {}).items()]
-        if not scene_set:  # the scene the diagnosis fitted it on (diagnose --scene-set)
-            scene_set = model_file.extra.get("scene") or {}
-    pipeline = build_pipeline(
-        registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
-        duration_s=duration_s, embedder_frames=embedder_frames, scene_set=scene_set,
-    )  # fmt: skip
-    scene = scene_of(pipeline.phenomenon)
-    if model_file is not None:
-        from physinfer.discrepancy.model import check_model_scene
-
-        check_model_scene(model_file, model, pipeline.phenomenon, scene)
-    fixed_values = fixed_by_user(pipeline, fixed)
-    settings = {
-        "optimizer": optimizer, "seed": seed, "noise_samples": noise_samples, "seeds_per_trial": seeds_per_trial,
-        "floor_samples": floor_samples, "select_top": select_top, "select_seeds": select_seeds,
-        "batch_size": batch_size,
-    }  # fmt: skip
-    # Checked before the target is read; the budget itself waits for the posterior (below).
-    RefineConfig(steps=steps if steps is not None else pipeline.phenomenon.default_steps, **settings).validate()
-    with naming_effects(registry, plugin, effects, "--truth"):
-        target = load_target(
-            pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, fixed=fixed,
-            conditioning=conditioning,
-        )  # fmt: skip
-    if duration_s is None and (duration_s := target_duration(pipeline, target)) is not None:
-        pipeline = build_pipeline(
-            registry, plugin, effects=effects, embedder=embedder, weights=weights, device=device, fixed=fixed,
-            duration_s=duration_s, embedder_frames=embedder_frames, scene_set=scene_set,
-        )  # fmt: skip
-    amortized, amortized_note = None, None
-    if use_posterior:
-        from physinfer.posterior.workflow import posterior_for_refinement
-
-        amortized, amortized_note = posterior_for_refinement(
-            registry, plugin=plugin, parameter_space=pipeline.simulator.parameter_space, clip=target.clip,
-            posterior=posterior, device=device, seed=seed, scene=scene,
-        )  # fmt: skip
-    budget = default_budget(pipeline.phenomenon, steps, from_posterior=amortized is not None and model_file is None)
-    config = RefineConfig(steps=budget, **settings)
-    if resume:
-        stored = run_dir.load_run_info()
-        if stored.get("target") not in (None, "default") and target_path is None:
-            raise UserInputError(f"{out} was run against --target {stored['target']}; pass the same --target")
+def _identity(request: RefineRequest, setup: _SetUp, budget: int, start: _Start) -> dict[str, Any]:
+    """What ``run.json`` records: the run's identity (checked on ``--resume``) and what it was
+    run with."""
+    model, search, target_path = setup.model, request.search, request.target.target_path
     run_info = {
-        "plugin": plugin,
-        "optimizer": optimizer,
-        "seed": seed,
+        "plugin": model.plugin,
+        "optimizer": search.optimizer,
+        "seed": search.seed,
         "steps": budget,
-        "effects": list(effects),
-        "embedder": embedder or pipeline.phenomenon.default_embedder,
-        "parameters": pipeline.simulator.parameter_space.to_dict(),
+        "effects": list(model.effects),
+        "embedder": model.embedder or setup.pipeline.phenomenon.default_embedder,
+        "parameters": setup.pipeline.simulator.parameter_space.to_dict(),
         "target": str(target_path) if target_path else "default",
-        "render_params": dict(target.render_params),
-        "truth": target.truth,
-        "overwrite": overwrite,
-        "seeds_per_trial": seeds_per_trial,
-        "batch_size": batch_size,  # informative: a resumed run may use another q
+        "render_params": dict(setup.target.render_params),
+        "truth": setup.target.truth,
+        "overwrite": request.execution.overwrite,
+        "seeds_per_trial": search.seeds_per_trial,
+        "batch_size": search.batch_size,  # informative: a resumed run may use another q
     }
-    run_info.update(optional_settings(fixed_values, duration_s, embedder_frames))
-    if scene is not None:  # recorded only when given: runs from before scenes stay resumable
-        run_info["scene"] = scene
-    run_info.update(resume_identity(target, weights))
-    factory = registry.get("optimizers", optimizer).load()
-    start_x, post_start, video_start = None, None, None
-    if model_file is not None:
-        from physinfer.discrepancy.warmstart import warm_start_factory
+    run_info.update(optional_settings(setup.fixed_values, model.duration_s, model.embedder_frames))
+    if setup.scene is not None:  # recorded only when given: runs from before scenes stay resumable
+        run_info["scene"] = setup.scene
+    run_info.update(resume_identity(setup.target, model.weights))
+    run_info.update(start.identity)
+    return run_info
 
-        space = pipeline.simulator.parameter_space
-        start = model_file.start_for(full_parameter_space(pipeline, fixed))  # fixed parameters dropped below
-        start_x = space.to_unit({name: start[name] for name in space.names})
-        factory = warm_start_factory(factory, start_x)
-    elif (video_start := start_from_video(pipeline, target)) is not None:
-        # What the whole video tells directly (a pendulum's period over 25 s) is sharper than
-        # an estimator that reads its first seconds; the estimator's intervals are still reported.
-        from physinfer.discrepancy.warmstart import warm_start_factory
 
-        start_x, box, run_info["start"] = video_start
-        factory = warm_start_factory(factory, start_x, box)
-        run_info["search_box"] = [[float(v) for v in ends] for ends in box]
-    elif amortized is not None:  # spend the budget where the video points
-        from physinfer.discrepancy.warmstart import warm_start_factory
-        from physinfer.posterior.refined import posterior_start
+def resume_identity(target: Target, weights: Path | None) -> dict[str, Any]:
+    """The ``run.json`` entries that tie a run to its target video and embedder weights.
 
-        post_start = posterior_start(amortized, pipeline.simulator.parameter_space)
-        start_x = post_start.start_x
-        factory = warm_start_factory(factory, start_x, post_start.box)
-        run_info["start"] = {"posterior_median": str(amortized.estimator), "search_box": post_start.box_physical}
-    # Every trial's coordinates depend on the warm start and the search box: part of the identity.
-    run_info["start_x"] = None if start_x is None else [float(v) for v in start_x]
-    if post_start is not None:
-        run_info["search_box"] = [[float(v) for v in ends] for ends in post_start.box]
-    from physinfer.trial_workers import PipelineSpec, scene_items, trial_workers
+    With :data:`~physinfer.rundir.IDENTITY`'s other entries they make the run's identity: a
+    ``--resume`` with another video, or other ``--weights``, is refused.
+    """
+    return {
+        "target_sha256": array_sha256(target.clip.frames, float(target.clip.fps)),
+        "weights_sha256": path_sha256(weights) if weights is not None and Path(weights).exists() else None,
+    }
 
-    spec = PipelineSpec(plugin, tuple(effects), tuple(fixed), duration_s=duration_s, scene=scene_items(scene))
-    with exclusive_directory(out):  # one writer: a second refine of this --out is refused
-        with (
-            trial_workers(pipeline, spec, workers=workers, scheduler=scheduler) as executor,
-            _progress(budget, enabled=progress) as on_trial,
-        ):
-            result = run_refinement(
-                pipeline, target, factory, run_dir, config, run_info=run_info, resume=resume, on_trial=on_trial
-            )
-        from physinfer.video import write_video
 
-        if np.isfinite(result.best_distance):  # the refine command's verdict (diagnose has its own tests)
-            result.extra["adequacy"] = assess_fit(
-                pipeline, result.best_params, result.best_distance, target, result.extra.get("noise_floor"), seed
-            )
-        if fixed_values:
-            result.extra["fixed"] = fixed_values
-        if scene is not None:
-            result.extra["scene"] = scene
-        if target.conditions:
-            result.extra["target_conditions"] = target.conditions
-        if video_start is not None:
-            result.extra["video_estimate"] = video_start[2]
-        if executor is not None:
-            result.extra["executor"] = executor
-        if amortized is not None:
-            from physinfer.posterior.refined import report_posterior
-
-            report_posterior(result, amortized, pipeline.simulator.parameter_space, post_start, run_dir.path, seed=seed)
-        elif amortized_note:
-            result.extra["posterior_note"] = amortized_note
-        write_video(run_dir.path / TARGET_FILE, target.clip)
-        write_outputs(result, pipeline, target, run_dir, seed)
-    pipeline.renderer.close()
-    return result
+def _report_beside(
+    result: RefineResult,
+    setup: _SetUp,
+    start: _Start,
+    posterior: tuple[Any, str | None],
+    executor: dict[str, Any] | None,
+    run_dir: RunDirectory,
+    seed: int,
+) -> None:
+    """Add to ``result`` what the refine command reports beside the best fit: its adequacy,
+    the held values, the scene, the target's conditioning, the video's estimate, the executor,
+    and the posterior (or why there is none)."""
+    extra, target = result.extra, setup.target
+    if np.isfinite(result.best_distance):  # the refine command's verdict (diagnose has its own tests)
+        extra["adequacy"] = assess_fit(
+            setup.pipeline, result.best_params, result.best_distance, target, extra.get("noise_floor"), seed
+        )
+    if setup.fixed_values:
+        extra["fixed"] = setup.fixed_values
+    if setup.scene is not None:
+        extra["scene"] = setup.scene
+    if target.conditions:
+        extra["target_conditions"] = target.conditions
+    if start.video_estimate is not None:
+        extra["video_estimate"] = start.video_estimate
+    if executor is not None:
+        extra["executor"] = executor
+    amortized, note = posterior
+    if amortized is not None:
+        space = setup.pipeline.simulator.parameter_space
+        report_posterior(result, amortized, space, start.posterior_start, run_dir.path, seed=seed)
+    elif note:
+        extra["posterior_note"] = note
 
 
 def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_dir: RunDirectory, seed: int) -> None:
     """Write ``result.json``, the refinement plot, the best trajectory and the side-by-side video,
     then ask the report for ``report.html``: the refine command's files (the loop writes only
     its run directory's trial log)."""
-    from physinfer.plotting import plot_refinement
-    from physinfer.video import side_by_side, write_video
+    from physinfer.plotting import plot_refinement  # matplotlib: a second to import
 
     best_traj = pipeline.simulator.simulate(result.best_params, seed=seed)
     best_traj.save(run_dir.path / "best_trajectory.npz")
@@ -333,9 +374,7 @@ def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_
         for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
     }
     atomic_write_json(run_dir.path / "result.json", result.summary())
-    from physinfer.report import write_report_quietly  # report.html; a failure only warns
-
-    write_report_quietly(run_dir.path)
+    write_report_quietly(run_dir.path)  # report.html; a failure only warns
 
 
 class _progress:

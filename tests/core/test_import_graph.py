@@ -120,6 +120,8 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.render_estimate": "the camera estimate",
         "physinfer.meshio": "another simulator's meshes in",
         "physinfer.target": "the target: a user's video read and conditioned, or the phenomenon's",
+        "physinfer.specs": "what a refinement is asked (model, target, search, execution): the "
+        "target's spec reads the target",
         "physinfer.as_given": "",
         "physinfer.adequacy": "a fit judged against what a camera does to a clip (as_given)",
         "physinfer.datasets": "",

@@ -22,10 +22,11 @@ replacing its fields. The CLI is a thin shell over these functions. Nothing is p
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from physinfer.api.footage import PreparedVideo, Rendering, prepare, render
 from physinfer.api.options import (
@@ -49,6 +50,8 @@ from physinfer.api.options import (
 from physinfer.api.plugins import registry
 from physinfer.api.results import Diagnosis, Simulation
 from physinfer.errors import UserInputError
+from physinfer.refinement import RefineResult
+from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
 
 __all__ = [
     "CalibrationOptions",
@@ -178,7 +181,7 @@ def refine(
     *,
     progress: Progress = False,
     **settings: Any,
-) -> Any:
+) -> RefineResult:
     """Refine a simulation until it matches a video (``physinfer refine``).
 
     Args:
@@ -194,46 +197,39 @@ def refine(
         90 % intervals and identifiability labels, when an estimator applies), the files
         written to ``run_dir``, ``to_dict()`` and ``plot()``.
     """
-    from physinfer.session import refine as run
+    from physinfer.session import run
 
     o = with_settings(RefineOptions, options, settings)
     if o.resume and o.out is None:
         raise UserInputError("--resume needs --out DIR (the run directory to continue)")
-    return run(
-        registry(),
-        plugin=plugin,
-        target_path=_optional(o.target),
-        fps=o.fps,
-        truth=as_assignments(o.truth, "truth"),
-        steps=o.steps,
-        optimizer=o.optimizer,
-        embedder=o.embedder,
-        weights=_optional(o.weights),
-        device=o.device,
-        effects=as_names(o.effects, "effects"),
-        model=_optional(o.model),
-        render_set=dict(o.render_set),
-        fixed=as_assignments(o.fix, "fix"),
-        seed=o.seed,
-        out=_optional(o.out) or _default_out(plugin),
-        resume=o.resume,
-        overwrite=o.overwrite,
-        progress=progress,
-        noise_samples=o.noise_samples,
-        seeds_per_trial=o.seeds_per_trial,
-        floor_samples=o.floor_samples,
-        select_top=o.select_top,
-        select_seeds=o.select_seeds,
-        batch_size=o.batch_size,
-        workers=o.workers,
-        scheduler=o.scheduler,
-        duration_s=o.duration,
-        embedder_frames=o.embedder_frames,
-        posterior=_optional(o.posterior),
-        use_posterior=not o.no_posterior,
-        scene_set=o.scene_set,
-        conditioning=o.conditioning(estimate_render=not o.no_render_estimate),
-    )
+    return run(registry(), _refine_request(plugin, o), progress=progress)
+
+
+def _refine_request(plugin: str, options: RefineOptions) -> RefineRequest:
+    """The refine command's specs (:mod:`physinfer.specs`) from its options: each field
+    copied from the option of its name, except those named or converted here."""
+    o = options
+    return RefineRequest(
+        model=_spec(
+            ModelSpec, o, plugin=plugin, effects=as_names(o.effects, "effects"), weights=_optional(o.weights),
+            fixed=as_assignments(o.fix, "fix"), duration_s=o.duration, model_file=_optional(o.model),
+        ),
+        target=_spec(
+            TargetSpec, o, target_path=_optional(o.target), truth=as_assignments(o.truth, "truth"),
+            render_set=dict(o.render_set), conditioning=o.conditioning(estimate_render=not o.no_render_estimate),
+        ),
+        search=_spec(SearchSpec, o, posterior=_optional(o.posterior), use_posterior=not o.no_posterior),
+        execution=_spec(ExecutionSpec, o, out=_optional(o.out) or _default_out(plugin)),
+    )  # fmt: skip
+
+
+_Spec = TypeVar("_Spec")
+
+
+def _spec(kind: type[_Spec], options: Any, **given: Any) -> _Spec:
+    """A ``kind`` spec: ``given``, and each of its other fields the option of the same name."""
+    names = [f.name for f in dataclasses.fields(kind)]  # type: ignore[arg-type]
+    return kind(**{name: given[name] if name in given else getattr(options, name) for name in names})
 
 
 def diagnose(
