@@ -50,7 +50,7 @@ from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import remainder_after_naming, self_consistency_gap
 from physinfer.discrepancy.judge import judge_stages
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
-from physinfer.discrepancy.outputs import write_outputs
+from physinfer.discrepancy.outputs import Findings, write_outputs
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.settings import DiagnoseSettings
@@ -315,10 +315,8 @@ def _diagnose_stages(
     say("[6/6] localising and writing outputs")
 
     with clock.stage("outputs"):
-        report = write_outputs(
-            settings, target, stages, before, after, named, candidates, verdict, scale, gap0, self_gap, calibration,
-            baseline,
-        )
+        found = Findings(baseline, gap0, stages, before, after, named, candidates, verdict, scale, self_gap, calibration)
+        report = write_outputs(settings, target, found)
     report["named_leaves"] = remainder
     report["unnamed"] = unnamed
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
