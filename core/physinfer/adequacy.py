@@ -25,7 +25,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.as_given import camera
 from physinfer.errors import SimulationFailed
+from physinfer.noise import noise_seeds
 from physinfer.types import Clip
 
 if TYPE_CHECKING:
@@ -47,8 +49,6 @@ METHOD = (
 def camera_round_trip(clip: Clip, *, crf: int = CODEC_CRF, sigma: float = NOISE_SIGMA, seed: int = 0) -> Clip:
     """``clip`` with sensor noise, written as H.264 at ``crf`` and read back
     (:func:`physinfer.as_given.camera` without white balance or blur)."""
-    from physinfer.as_given import camera
-
     effects = {"crf": crf, "noise": sigma, "gain": np.ones(3), "blur": 0.0}
     return camera(clip, effects, np.random.default_rng(seed))
 
@@ -125,8 +125,6 @@ def predictive_check(pipeline: Pipeline, params: dict[str, float], target: Targe
     distance to the target with the scale of agreement, as :func:`assess_fit` does for a
     refinement's best fit. A video the model cannot make stays far from every θ, the
     posterior's median included."""
-    from physinfer.noise import noise_seeds
-
     try:
         clips = [
             pipeline.renderer.render(pipeline.simulator.simulate(params, seed=s), target.render_params)

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from physinfer import video
+from physinfer.conditioning import Conditioning, condition_target
 from physinfer.errors import UserInputError
 from physinfer.types import Clip
 
@@ -66,8 +68,6 @@ class CameraModel:
 def camera(clip: Clip, effects: dict[str, Any], rng: np.random.Generator) -> Clip:
     """``clip`` through a camera and a file: white balance, blur and sensor noise, then an
     H.264 encoding at ``effects["crf"]`` read back. A grayscale clip is seen as colour."""
-    from physinfer.video import read_video, write_video
-
     frames = np.asarray(clip.frames, dtype=np.float32)
     if frames.ndim == 3:
         frames = frames[..., None]
@@ -80,8 +80,8 @@ def camera(clip: Clip, effects: dict[str, Any], rng: np.random.Generator) -> Cli
         frames = frames + rng.normal(0.0, effects["noise"], frames.shape).astype(np.float32)
     pixels = np.clip(np.rint(frames), 0, 255).astype(np.uint8)
     with tempfile.TemporaryDirectory(prefix="physinfer-as-given-") as folder:
-        path = write_video(Path(folder) / "clip.mp4", pixels, clip.fps, crf=effects["crf"])
-        back = read_video(path)
+        path = video.write_video(Path(folder) / "clip.mp4", pixels, clip.fps, crf=effects["crf"])
+        back = video.read_video(path)
     height, width = pixels.shape[1:3]
     return Clip(back.frames[: len(pixels), :height, :width], clip.fps)
 
@@ -107,8 +107,6 @@ def as_given(
     move) — as it would refuse such a target, whose posterior is then never asked for — is
     returned through the camera only.
     """
-    from physinfer.conditioning import Conditioning, condition_target
-
     filmed = camera(clip, model.draw(rng), rng)
     try:
         conditioned, _zeta, _record = condition_target(

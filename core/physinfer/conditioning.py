@@ -23,7 +23,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from physinfer.errors import UserInputError
+from physinfer.framing import PrepareSettings, default_framing, prepare_clip
+from physinfer.render_estimate import estimate_render_params
+from physinfer.static_background import freeze_static
+from physinfer.tracking import check_one_mover
 from physinfer.types import Clip
+from physinfer.video import resample
 
 Box = tuple[float, float, float, float]
 
@@ -81,8 +86,6 @@ def frame_clip(phenomenon: Any, embedder: Any, clip: Clip, roi: Box | None) -> t
     Returns:
         The framed clip and what was found (``box``, ``square``, shake, ``warnings``, ...).
     """
-    from physinfer.framing import PrepareSettings, default_framing, prepare_clip
-
     size = int(getattr(embedder, "size", 224)) if embedder is not None else 224
     fps = float(embedder.fps) if embedder is not None else None
     settings = PrepareSettings(size=size, fps=fps, roi=roi)
@@ -101,9 +104,6 @@ def check_one_subject(clip: Clip, roi: Box | None, fps: float) -> None:
     Raises:
         UserInputError: naming the moving regions and asking for ``--roi``.
     """
-    from physinfer.tracking import check_one_mover
-    from physinfer.video import resample
-
     if roi is not None:
         x, y, w, h = (int(round(v)) for v in roi)
         clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
@@ -139,8 +139,6 @@ def freeze_background(clip: Clip) -> tuple[Clip, dict[str, Any]]:
     identified" (90 % interval 0-10 m/s) against 2.6-5.0 m/s for the render itself; frozen,
     2.6-5.0 m/s again (docs/real-videos.md).
     """
-    from physinfer.static_background import freeze_static
-
     frozen, static = freeze_static(clip.frames)  # a Clip's frames are (T, H, W, C) uint8
     return Clip(frozen, clip.fps), static
 
@@ -181,8 +179,6 @@ def condition_target(
         record["prepared"] = {"skipped": "the video is square: taken as framed already", "static": static}
     zeta: dict[str, Any] = {}
     if conditioning.estimate_render and embedder is not None:
-        from physinfer.render_estimate import estimate_render_params
-
         try:
             estimate = estimate_render_params(phenomenon, clip, embedder=embedder)
         except UserInputError as exc:  # e.g. an estimator of another embedder: ζ is auxiliary here

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.io import atomic_write_text
 from physinfer.types import FPS_RANGE, Trajectory
 from physinfer.types import check_fps as types_check_fps
 
@@ -405,8 +406,6 @@ def write_obj_sequence(
     Returns:
         The paths written, in frame order.
     """
-    from physinfer.io import atomic_write_text
-
     folder = Path(folder)
     uv = trajectory.extras.get("uv")
     faces = np.asarray(trajectory.faces) + 1

@@ -32,6 +32,9 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.io import atomic_save_npz
+from physinfer.plugins import load_registry
+from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
 
 FORMAT = "physinfer-render-estimator"
 VERSION = 1
@@ -118,8 +121,6 @@ class RenderEstimator:
 
     def save(self, path: str | Path) -> Path:
         """Write the ``.npz`` atomically."""
-        from physinfer.io import atomic_save_npz
-
         atomic_save_npz(
             path,
             format=np.array(FORMAT),
@@ -159,8 +160,6 @@ class RenderEstimator:
 
     def check_embedder(self, embedder: Any) -> None:
         """Refuse an embedder whose fingerprint differs from the one it was fitted on."""
-        from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
-
         mismatch = probe_mismatch(list(self.probe), embedder_probe(embedder))
         if mismatch > PROBE_TOLERANCE:
             raise UserInputError(
@@ -264,8 +263,6 @@ def estimate_render_params(
         }
     estimator = RenderEstimator.load(path)
     if embedder is None:
-        from physinfer.plugins import load_registry
-
         registry, _ = load_registry()
         embedder = registry.embedder(estimator.embedder, model=None, device=device)
     needed = int(embedder.n_frames) / float(embedder.fps)

@@ -25,7 +25,9 @@ from physinfer.framing.shake import (
     rms_about_mean,
     valid_mask,
 )
+from physinfer.static_background import freeze_static
 from physinfer.types import Clip
+from physinfer.video import resample
 
 
 def prepare_clip(
@@ -123,7 +125,6 @@ def _working_frames(clip: Clip, first: int, stop: int, fps: float | None) -> tup
     fps_in = float(clip.fps)
     if fps is None or fps >= fps_in:
         return frames, clip.fps
-    from physinfer.video import resample
 
     return resample(Clip(frames, fps_in), fps).frames, float(fps)
 
@@ -191,12 +192,8 @@ def _framed(
     cropped, padded = crop_square(frames, square, shifts, settings.size)
     static: dict[str, float] = {}
     if settings.freeze_background:
-        from physinfer.static_background import freeze_static
-
         cropped, static = freeze_static(cropped)
     out = Clip(cropped, fps)
     if settings.fps is not None:
-        from physinfer.video import resample
-
         out = resample(out, settings.fps)
     return out, padded, static

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from physinfer.framing.settings import Box
+from physinfer.video import to_gray
 
 ANALYSIS_SIDE = 640
 """Longer side in pixels of the grayscale copy the analysis runs on (a 1920×1080 video is
@@ -21,8 +22,6 @@ def analysis_frames(frames: np.ndarray, side: int = ANALYSIS_SIDE) -> tuple[np.n
         ``(T, h, w)`` luma in [0, 1] and the scale factor (analysis px per input px).
     """
     from PIL import Image
-
-    from physinfer.video import to_gray
 
     height, width = frames.shape[1:3]
     scale = min(1.0, side / max(height, width))

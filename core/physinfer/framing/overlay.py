@@ -6,12 +6,11 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.framing.settings import PreparedClip
+from physinfer.io import atomic_path
 
 
 def save_overlay(result: PreparedClip, path: str | Path) -> Path:
     """:func:`overlay_figure` as a PNG, written atomically."""
-    from physinfer.io import atomic_path
-
     fig = overlay_figure(result)
     path = Path(path)
     with atomic_path(path, suffix=".png") as tmp:
