@@ -17,9 +17,12 @@ from typing import Any
 import numpy as np
 
 from physinfer.as_given import CameraModel
+from physinfer.datasets.loader import ClipDataset
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_json, check_output_dir
+from physinfer.posterior.calibration import calibrate, calibration_figure, plot_calibration
 from physinfer.posterior.features import TargetPath, embed_dataset
+from physinfer.posterior.inputs import checked_rows
 from physinfer.posterior.loading import (
     ProgressFn,
     check_dataset,
@@ -27,6 +30,7 @@ from physinfer.posterior.loading import (
     load_estimator,
     no_progress,
 )
+from physinfer.posterior.summary import PRIOR_VARIANCE
 from physinfer.registry import Registry
 
 
@@ -63,8 +67,6 @@ class CalibrationReport:
     def plot(self) -> Any:
         """Rank histograms and coverage per parameter (a matplotlib figure;
         ``calibration.png`` is the same drawing)."""
-        from physinfer.posterior.calibration import calibration_figure
-
         return calibration_figure(self.calibration, title=self.title)
 
     @property
@@ -92,9 +94,6 @@ def evaluate_calibration(
     dataset like the training clips), once as users give videos (the report) and once as
     stored (``in_memory``).
     """
-    from physinfer.datasets.loader import ClipDataset
-    from physinfer.posterior.calibration import plot_calibration
-
     if n_samples < 50:
         raise UserInputError(
             f"--samples {n_samples}: at least 50 posterior samples per simulation are needed"
@@ -163,10 +162,6 @@ def _calibrate_pairs(
 ) -> CalibrationReport:
     """Ranks, coverage, median errors and contraction of ``estimator`` on embedded ``pairs``;
     ``where``: the report's ``estimator`` (path), ``data``, ``split`` and ``targets``."""
-    from physinfer.posterior.calibration import calibrate
-    from physinfer.posterior.inputs import checked_rows
-    from physinfer.posterior.summary import PRIOR_VARIANCE
-
     names = estimator.parameter_space.names
     medians = np.empty_like(pairs.theta_unit, dtype=np.float64)
     variances = np.empty_like(medians)

@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
+
+from physinfer.io import atomic_path
 
 #: Nominal levels whose coverage is reported.
 LEVELS: tuple[float, ...] = (0.5, 0.9)
@@ -131,14 +132,16 @@ def calibrate(
     coverage = {float(lv): coverage_from_ranks(ranks, n_samples, lv) for lv in levels}
     # Ranks are discrete on 0..S; a KS test against the continuous uniform is accurate for S ≫ 1.
     u = (ranks + 0.5) / (n_samples + 1)
+    # scipy.stats is imported here, not above: the posterior commands' face reaches this module,
+    # and refine and infer load it without calibrating.
+    from scipy import stats
+
     ks = np.array([stats.kstest(u[:, i], "uniform").pvalue for i in range(u.shape[1])])
     return Calibration(list(names), ranks, n_samples, coverage, ks)
 
 
 def plot_calibration(cal: Calibration, path: str | Path, *, title: str = "") -> Path:
     """:func:`calibration_figure` as one PNG."""
-    from physinfer.io import atomic_path
-
     fig = calibration_figure(cal, title=title)
     path = Path(path)
     with atomic_path(path, suffix=".png") as tmp:

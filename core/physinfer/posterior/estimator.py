@@ -27,10 +27,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from physinfer.devices import check_device
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
 from physinfer.parameters import ParameterSpace
 from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
+from physinfer.posterior.inputs import check_inputs
+from physinfer.scene import default_scene, same_scene, scene_context, scene_remedy, scene_text
 
 FORMAT_NAME = "physinfer-posterior"
 FORMAT_VERSION = 1
@@ -219,8 +222,6 @@ class PosteriorEstimator:
     def condition(self, embedding: np.ndarray, scene: Mapping[str, Any] | None) -> np.ndarray:
         """``(x_dim,)`` what to sample at: the embedding, then the ranged scene settings of
         ``scene`` (a complete scene; only read when the estimator was trained across ranges)."""
-        from physinfer.scene import scene_context
-
         x = np.asarray(embedding, dtype=np.float32).reshape(-1)
         ranges = self.config.scene_ranges
         if not ranges:
@@ -236,8 +237,6 @@ class PosteriorEstimator:
         """``(x, record)``: the estimator's input checked against its training inputs
         (:func:`physinfer.posterior.inputs.check_inputs`; ``record`` is ``None`` for an
         estimator trained before the check)."""
-        from physinfer.posterior.inputs import check_inputs
-
         return check_inputs(self.config.inputs, x)
 
     def sample_unit(self, x: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
@@ -364,8 +363,6 @@ class PosteriorEstimator:
         Raises:
             UserInputError: naming both scenes and how to get a matching estimator.
         """
-        from physinfer.scene import default_scene, same_scene, scene_remedy, scene_text
-
         ranges = self.config.scene_ranges or {}
         where = f"{path} " if path else ""
         if ranges:
@@ -410,8 +407,6 @@ class PosteriorEstimator:
 def resolve_device(device: str | None) -> str:
     """``device`` checked (:func:`physinfer.devices.check_device`); ``None``: ``"cuda"``
     when a GPU is visible, else ``"cpu"``."""
-    from physinfer.devices import check_device
-
     checked = check_device(device)
     if checked is None:
         return "cuda" if torch.cuda.is_available() else "cpu"

@@ -21,12 +21,14 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.as_given import as_given as through_user_path
 from physinfer.datasets.loader import ClipDataset
 from physinfer.datasets.storage import MANIFEST_FILE, file_digest
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_save_npz
 from physinfer.parameters import ParameterSpace
 from physinfer.roles import Embedder
+from physinfer.scene import scene_context
 from physinfer.types import Clip
 
 CACHE_DIR = "embeddings"
@@ -169,8 +171,6 @@ def embed_dataset(
 
 def _scene_context(dataset: ClipDataset) -> np.ndarray:
     """``(N, C)`` the ranged scene settings of each clip (``(N, 0)`` without ranges)."""
-    from physinfer.scene import scene_context
-
     if not dataset.scene_ranges:
         return np.zeros((len(dataset), 0), dtype=np.float32)
     return np.array(
@@ -237,8 +237,6 @@ def _embed_range(
 ) -> np.ndarray:
     clips = [as_clip(dataset[i], dataset.fps) for i in range(start, stop)]
     if as_given is not None:
-        from physinfer.as_given import as_given as through_user_path
-
         clips = [
             through_user_path(
                 clip,

@@ -11,8 +11,10 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator, resolve_device
 from physinfer.registry import Registry
+from physinfer.scene import default_scene, scene_text
 
 #: ``progress(stage, done, total)``.
 ProgressFn = Callable[[str, int, int], None]
@@ -32,8 +34,6 @@ def build_embedder(
     device: str | None,
 ) -> Any:
     """The pipeline (simulator, renderer, embedder) of ``plugin`` with the chosen embedder."""
-    from physinfer.pipeline import build_pipeline
-
     return build_pipeline(
         registry,
         plugin,
@@ -118,8 +118,6 @@ def _shipped_for_scene(
 
 def _coverage(estimator: PosteriorEstimator, path: Path, phenomenon: Any) -> str:
     """``posterior_sizes.safetensors covers flag_height 0.6..2, flag_length 0.9..3 (pinning=hoist, ...)``."""
-    from physinfer.scene import default_scene, scene_text
-
     ranges = estimator.config.scene_ranges or {}
     spans = ", ".join(f"{name} {low:g}..{high:g}" for name, (low, high) in sorted(ranges.items()))
     fixed = {k: v for k, v in {**default_scene(phenomenon), **(estimator.config.scene or {})}.items() if k not in ranges}

@@ -11,13 +11,19 @@ from typing import Any
 import numpy as np
 
 from physinfer.as_given import CameraModel
+from physinfer.datasets.loader import ClipDataset
 from physinfer.errors import UserInputError
 from physinfer.io import check_output_dir
 from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator, resolve_device
 from physinfer.posterior.features import TargetPath, embed_dataset
-from physinfer.posterior.fingerprint import embedder_probe
+from physinfer.posterior.fingerprint import embedder_probe, probe_clip
+from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
+from physinfer.posterior.inputs import checked_rows
 from physinfer.posterior.loading import ProgressFn, build_embedder, check_dataset, no_progress
+from physinfer.posterior.training import train_estimator
 from physinfer.registry import Registry
+from physinfer.types import Clip
+from physinfer.video import to_gray
 
 
 @dataclass
@@ -99,9 +105,6 @@ def train_posterior(
             the embedder reads, grayscale clips for an embedder that reads colour, too few
             clips, or an estimator that fails the held-out check.
     """
-    from physinfer.datasets.loader import ClipDataset
-    from physinfer.posterior.training import train_estimator
-
     network = network or NetworkConfig()
     network.validate()  # before the slow embedding
     out = _estimator_path(out)
@@ -200,10 +203,6 @@ def check_clip_colour(dataset: Any, embedder: Any, name: str) -> None:
 
 def reads_colour(embedder: Any) -> bool:
     """Whether ``embedder`` tells a colour clip from its grayscale (BT.601 luma) version."""
-    from physinfer.posterior.fingerprint import probe_clip
-    from physinfer.types import Clip
-    from physinfer.video import to_gray
-
     probe = probe_clip(int(embedder.n_frames), float(embedder.fps))
     frames = probe.frames.astype(np.float32)
     tint = np.array([1.3, 0.8, 0.6], dtype=np.float32)  # a colour clip with the probe's motion
@@ -227,10 +226,6 @@ def _check_held_out(
 ) -> dict[str, Any] | None:
     """The held-out check on the dataset's ``test`` (else ``val``) split, or ``None`` when
     it has no held-out clips."""
-    from physinfer.datasets.loader import ClipDataset
-    from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
-    from physinfer.posterior.inputs import checked_rows
-
     held = next((s for s in ("test", "val") if s != split and len(ClipDataset(data, s)) > 0), None)
     if held is None:
         return None
