@@ -16,16 +16,12 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from physinfer.errors import SimulationFailed
-from physinfer.evaluation import simulate_many, squared_distance
-
-if TYPE_CHECKING:
-    from physinfer.evaluation import ClipEmbedder, Pipeline
-
+from physinfer.evaluation import ClipEmbedder, Pipeline, simulate_many, squared_distance
 
 #: Salt of :func:`noise_seeds` unless another is given.
 DEFAULT_SEED_SALT = 0x5EED
