@@ -146,35 +146,13 @@ def _run_refinement(
     if len(records) < config.steps:  # a finished run (read back by diagnose) needs no optimizer
         optimizer = optimizer_factory(dim=len(space), seed=config.seed, names=space.names)
         _replay(optimizer, records, config, sem)
-    seeds = config.trial_seeds()
     best = min((r.distance for r in records if r.distance is not None), default=float("inf"))
-
     while len(records) < config.steps:
-        step = len(records)
-        t0 = time.perf_counter()
-        trials = next_trials(optimizer, step, min(config.batch_size, config.steps - step), len(space))
-        t_ask = time.perf_counter() - t0
-        params = [space.from_unit(trial.x) for trial in trials]
-        outcomes = evaluate_batch(pipeline, params, target_embedding, target.render_params, seeds)
-        t1 = time.perf_counter()
-        for trial, (distance, _, _) in zip(trials, outcomes, strict=True):
-            optimizer.tell(trial.index, config.objective(distance), sem if distance is not None else None)
-        optimizer_s = (t_ask + time.perf_counter() - t1) / len(trials)
-        for offset, (trial, theta, (distance, error, timings)) in enumerate(zip(trials, params, outcomes, strict=True)):
-            record = TrialRecord(
-                step=step + offset,
-                index=trial.index,
-                x=[float(v) for v in trial.x],
-                params=theta,
-                distance=distance,
-                status="ok" if distance is not None else "failed",
-                error=error,
-                timings={**timings, "optimizer": optimizer_s},
-            )
+        for record in _step(optimizer, pipeline, target, target_embedding, len(records), config, sem):
             run_dir.append_trial(record)
             records.append(record)
-            if distance is not None:
-                best = min(best, distance)
+            if record.distance is not None:
+                best = min(best, record.distance)
             if on_trial is not None:
                 on_trial(record, best)
     selection = None
@@ -183,17 +161,60 @@ def _run_refinement(
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
     result.extra["observation_sem"] = sem
+    _report_place(result, pipeline)
+    if selection is not None:
+        result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
+    if config.floor_samples:
+        result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
+    return result
+
+
+def _step(
+    optimizer: Optimizer,
+    pipeline: Pipeline,
+    target: Target,
+    target_embedding: np.ndarray,
+    step: int,
+    config: RefineConfig,
+    sem: float | None,
+) -> list[TrialRecord]:
+    """One optimizer step from trial ``step`` on: ask for its trials, simulate and embed them
+    as one batch, tell the optimizer their objectives; the trials' records, in order."""
+    space = pipeline.simulator.parameter_space
+    t0 = time.perf_counter()
+    trials = next_trials(optimizer, step, min(config.batch_size, config.steps - step), len(space))
+    t_ask = time.perf_counter() - t0
+    params = [space.from_unit(trial.x) for trial in trials]
+    outcomes = evaluate_batch(pipeline, params, target_embedding, target.render_params, config.trial_seeds())
+    t1 = time.perf_counter()
+    for trial, (distance, _, _) in zip(trials, outcomes, strict=True):
+        optimizer.tell(trial.index, config.objective(distance), sem if distance is not None else None)
+    optimizer_s = (t_ask + time.perf_counter() - t1) / len(trials)
+    return [
+        TrialRecord(
+            step=step + offset,
+            index=trial.index,
+            x=[float(v) for v in trial.x],
+            params=theta,
+            distance=distance,
+            status="ok" if distance is not None else "failed",
+            error=error,
+            timings={**timings, "optimizer": optimizer_s},
+        )
+        for offset, (trial, theta, (distance, error, timings)) in enumerate(zip(trials, params, outcomes, strict=True))
+    ]
+
+
+def _report_place(result: RefineResult, pipeline: Pipeline) -> None:
+    """Add where the best fit lies: its nuisance values (reported apart from the physics) and
+    the parameters at a bound of their range."""
+    space = pipeline.simulator.parameter_space
     nuisance = [name for name in getattr(pipeline.phenomenon, "nuisance", ()) if name in result.best_params]
     if nuisance:  # reported apart; a bound of a nuisance (a phase of 0 or 1 cycle) says nothing
         result.extra["nuisance"] = {name: result.best_params[name] for name in nuisance}
     result.extra["at_bounds"] = {
         name: bound for name, bound in space.at_bounds(result.best_params).items() if name not in nuisance
     }
-    if selection is not None:
-        result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
-    if config.floor_samples:
-        result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
-    return result
 
 
 def summarise(

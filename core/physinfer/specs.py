@@ -234,7 +234,15 @@ class ExecutionSpec:
 
 @dataclass(frozen=True)
 class RefineRequest:
-    """A refinement as its four specs."""
+    """A refinement as its four specs, each built once (:meth:`from_keywords`, or
+    :mod:`physinfer.api` from its options) and read by :func:`physinfer.session.run`.
+
+    Attributes:
+        model: What the model is.
+        target: What the target is.
+        search: How to search.
+        execution: How to execute.
+    """
 
     model: ModelSpec
     target: TargetSpec
