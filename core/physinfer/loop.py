@@ -56,6 +56,7 @@ from physinfer.rundir import (  # noqa: F401 - the run files' names re-exported
     TrialRecord,
     embedding_fingerprint,
 )
+from physinfer.threads import refinement_torch_threads, torch_threads
 
 
 def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:
@@ -109,8 +110,6 @@ def run_refinement(
         The :class:`RefineResult` (the refine command writes it out:
             :func:`physinfer.session.write_outputs`).
     """
-    from physinfer.threads import refinement_torch_threads, torch_threads
-
     config.validate()
     with torch_threads(refinement_torch_threads()):
         return _run_refinement(

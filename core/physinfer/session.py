@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.adequacy import assess_fit
+from physinfer.console import err_console
 from physinfer.discrepancy.model import ModelFile, check_model_scene
 from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
@@ -397,8 +398,6 @@ class _progress:
             TextColumn,
             TimeRemainingColumn,
         )
-
-        from physinfer.console import err_console
 
         self._bar = Progress(
             TextColumn("refining"),

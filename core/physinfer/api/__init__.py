@@ -51,6 +51,7 @@ from physinfer.api.plugins import registry
 from physinfer.api.results import Diagnosis, Simulation
 from physinfer.errors import UserInputError
 from physinfer.refinement import RefineResult
+from physinfer.session import run as run_refine
 from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
 
 __all__ = [
@@ -197,12 +198,10 @@ def refine(
         90 % intervals and identifiability labels, when an estimator applies), the files
         written to ``run_dir``, ``to_dict()`` and ``plot()``.
     """
-    from physinfer.session import run
-
     o = with_settings(RefineOptions, options, settings)
     if o.resume and o.out is None:
         raise UserInputError("--resume needs --out DIR (the run directory to continue)")
-    return run(registry(), _refine_request(plugin, o), progress=progress)
+    return run_refine(registry(), _refine_request(plugin, o), progress=progress)
 
 
 def _refine_request(plugin: str, options: RefineOptions) -> RefineRequest:
