@@ -7,7 +7,7 @@ default; seeds no dataset uses (θ from ``700_000 + i``, the simulation from ``8
 Each is simulated and rendered as ``physinfer simulate --out target.mp4`` does (H.264 CRF 18),
 and inferred as ``physinfer infer --target target.mp4 [--scene-set ...]`` does (read,
 conditioned, embedded, 2,000 samples; no predictive check). ``--degraded`` adds a second
-condition per target: the render composited over a photographic background (a frame of a
+condition per target (the flag only): the render composited over a photographic background (a frame of a
 real video from ``--photo``, else a procedural photo-like one), sensor noise of 3 grey levels
 and H.264 at CRF 35.
 
@@ -165,11 +165,14 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=0)
     parser.add_argument("--posterior", type=Path, action="append", default=None,
                         help="estimator file (default: the shipped one); repeat to compare several on the same targets")
-    parser.add_argument("--degraded", action="store_true", help="also: photo background, noise, H.264 CRF 35")
+    parser.add_argument("--degraded", action="store_true",
+                        help="also: photo background, noise, H.264 CRF 35 (the flag's renderer only)")
     parser.add_argument("--photo", default=None, help="a video whose middle frame is the background")
     parser.add_argument("--rows", type=Path, default=None, help="append per-target rows (JSON lines)")
     parser.add_argument("--summarise", action="store_true", help="only summarise --rows")
     args = parser.parse_args()
+    if args.degraded and args.plugin != "flag":
+        parser.error("--degraded composites the flag renderer's RGBA renders; drop it for other plugins")
     if args.summarise:
         rows = [json.loads(line) for line in args.rows.read_text().splitlines() if line.strip()]
         print(json.dumps({"summary": summarise(rows), "rows": len(rows)}, indent=1))

@@ -11,10 +11,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 from physinfer import Effect, Phenomenon, Target
 from physinfer.scene import SceneSetting
+
+#: The shipped posterior estimator (``make posterior-hanging-cloth``): fan W2, the default
+#: 0.6 m × 0.8 m fabric, 32-frame clips, the ``spectral`` embedder; trained as users give videos.
+DEFAULT_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_default.safetensors"
 
 #: Ground truth of the embedded target: a fairly stiff, light fabric.
 DEFAULT_TRUTH = {"bending_multiplier": 12.0, "area_weight": 0.12}
@@ -86,5 +91,6 @@ def make_phenomenon() -> Phenomenon:
         default_embedder="spectral",
         default_target=default_target,
         default_steps=20,
+        default_posterior=str(DEFAULT_POSTERIOR),
         scene_settings=SCENE_SETTINGS,
     )
