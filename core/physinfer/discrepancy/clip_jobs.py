@@ -26,12 +26,15 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.ladder import Probe, ProbeFactory, stack_rows
+from physinfer.discrepancy.parallel import WorkerPool, worker_pipeline
+from physinfer.evaluation import ClipEmbedder, Pipeline, simulate_and_embed, simulate_many
+from physinfer.pipeline import fixed_by_user
+from physinfer.threads import refinement_torch_threads, torch_threads
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.parallel import WorkerPool
     from physinfer.discrepancy.settings import DiagnoseSettings
-    from physinfer.evaluation import ClipEmbedder, Pipeline
 
 Log = Callable[[str], None]
 T = TypeVar("T")
@@ -66,10 +69,6 @@ class ClipJob:
 def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
     """Simulate, render and embed one clip in this (worker) process: its embedding (``None``
     for a failed simulation), its trajectory (when kept) and the seconds it records."""
-    from physinfer.discrepancy.parallel import worker_pipeline
-    from physinfer.evaluation import simulate_many
-    from physinfer.threads import refinement_torch_threads, torch_threads
-
     registry, base = worker_pipeline(job.settings)
     model = _model(registry, base, job.settings, job.effects)
     trajectory, _ = simulate_many(model.simulator, [dict(job.params)], [int(job.seed)])[0]
@@ -83,9 +82,6 @@ def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
 
 def _model(registry: Any, base: Pipeline, settings: DiagnoseSettings, effects: tuple[str, ...]) -> Pipeline:
     """``base`` with ``effects`` switched in, built once per worker thread."""
-    from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.pipeline import fixed_by_user
-
     if not effects:
         return base
     cache: dict[tuple[int, tuple[str, ...]], Pipeline] = _local.__dict__.setdefault("models", {})
@@ -161,8 +157,6 @@ def pooled_clip_embedder(
     embedding comes back as the embedder gave it); if the workers fail, the clips are made
     here instead.
     """
-    from physinfer.evaluation import simulate_and_embed
-
     if pool is None or pool.size < 2:
         return None
     executor, settings = pool.executor(), pool.settings

@@ -13,24 +13,33 @@ as lines: the gap shrinking from the baseline to the named effect.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib  # noqa: TID253 - a figures module, imported only when drawing
+import numpy as np
 
-matplotlib.use("Agg")  # files only; never needs a display
-import matplotlib.pyplot as plt  # noqa: E402, TID253
-import numpy as np  # noqa: E402
+from physinfer.discrepancy.localise import SpectralMaps
+from physinfer.io import atomic_path
 
-from physinfer.discrepancy.localise import SpectralMaps  # noqa: E402
-from physinfer.io import atomic_path  # noqa: E402
+
+@functools.cache
+def _pyplot() -> Any:
+    """matplotlib's pyplot on the Agg backend (files only; never needs a display), imported
+    when the first figure is drawn: the API's results import this module without drawing."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _save(fig: Any, path: Path) -> Path:
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    _pyplot().close(fig)
     return path
 
 
@@ -48,7 +57,7 @@ def plot_maps(rows: Sequence[tuple[str, SpectralMaps]], path: str | Path) -> Pat
     nyquist = target.fps / 2.0
     log_power = [np.log10(m.power + 1e-9) for _, m in rows]
     vmin, vmax = min(float(p.min()) for p in log_power), max(float(p.max()) for p in log_power)
-    fig, axes = plt.subplots(len(rows), 3, figsize=(10.5, 3.2 * len(rows)), squeeze=False)
+    fig, axes = _pyplot().subplots(len(rows), 3, figsize=(10.5, 3.2 * len(rows)), squeeze=False)
     for i, ((label, maps), lp) in enumerate(zip(rows, log_power, strict=True)):
         im = axes[i, 0].imshow(maps.dominant, cmap="viridis", vmin=0.0, vmax=nyquist)
         axes[i, 0].set_title(f"{label}: dominant frequency", fontsize=9)
@@ -116,7 +125,7 @@ def gaps_figure(
     Returns:
         The matplotlib figure.
     """
-    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(models), 3.6))
+    fig, ax = _pyplot().subplots(figsize=(1.6 + 1.3 * len(models), 3.6))
     for i, m in enumerate(models):
         colour = "C2" if m["label"] == named else ("C0" if i == 0 else "C7")
         ax.bar(i, m["gap"], color=colour, alpha=0.6, width=0.6)

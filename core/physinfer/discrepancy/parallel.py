@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.datasets.executors import default_workers, open_executor
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.stages import (
     GapContext,
@@ -48,8 +49,11 @@ from physinfer.discrepancy.stages import (
     control_stage,
     effect_stage,
 )
+from physinfer.plugins import load_registry
 from physinfer.progress import StageProgress
 from physinfer.roles import Target
+from physinfer.scene import SceneRegistry
+from physinfer.threads import refinement_torch_threads, torch_threads
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings
@@ -141,8 +145,6 @@ def stage_jobs(
 
 def run_job(job: StageJob) -> dict[str, float]:
     """Run one job in this (worker) process; the seconds each of its stages took."""
-    from physinfer.threads import refinement_torch_threads, torch_threads
-
     registry, base = worker_pipeline(job.settings)
     common = {"registry": registry, "settings": job.settings}
     gaps = GapContext(job.target, job.target_embedding, job.seeds, job.settings.out)
@@ -194,7 +196,6 @@ def _installed(settings: DiagnoseSettings) -> Any:
     """The registry a worker can build: the settings' factory's, or the installed plugins'."""
     if settings.registry_factory is not None:
         return settings.registry_factory()
-    from physinfer.plugins import load_registry
 
     return load_registry()[0]
 
@@ -203,7 +204,6 @@ def scene_registry(registry: Any, settings: DiagnoseSettings) -> Any:
     """``registry`` with the diagnosed phenomenon bound to the settings' scene, if any."""
     if not settings.scene_set:
         return registry
-    from physinfer.scene import SceneRegistry
 
     return SceneRegistry(registry, settings.plugin, dict(settings.scene_set))
 
@@ -218,7 +218,6 @@ def usable_workers(
     """
     if settings.scheduler:
         return max(1, n_jobs), None
-    from physinfer.datasets.executors import default_workers
 
     wanted = default_workers() if settings.workers is None else settings.workers
     workers = min(wanted, n_jobs)
@@ -262,8 +261,6 @@ class WorkerPool:
     def executor(self) -> Executor:
         """The pool's executor, started on the first call."""
         if self._executor is None:
-            from physinfer.datasets.executors import open_executor
-
             self._executor, _ = self._stack.enter_context(
                 open_executor(workers=self.size, scheduler=self.settings.scheduler, threads_per_worker=1)
             )

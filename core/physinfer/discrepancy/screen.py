@@ -41,6 +41,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.discrepancy.candidates import augmented_pipeline
+from physinfer.discrepancy.clip_jobs import concurrently, pooled_probes
 from physinfer.discrepancy.ladder import (
     Ladder,
     Probe,
@@ -52,6 +54,7 @@ from physinfer.discrepancy.ladder import (
 )
 from physinfer.discrepancy.limit_rule import Threshold
 from physinfer.io import atomic_write_json, read_keyed_json
+from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
@@ -183,10 +186,6 @@ def _simulate(
     """The rungs at ``fractions`` of each effect in ``names``: all at once, each clip a job on
     the pool's workers when it has two or more; an effect whose clips fail there (or every
     effect without them) is simulated here."""
-    from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.discrepancy.clip_jobs import concurrently, pooled_probes
-    from physinfer.pipeline import fixed_by_user
-
     fixed = fixed_by_user(base, settings.fixed)
     models = {name: augmented_pipeline(base, [effect_objs[name]], settings.duration_s, fixed) for name in names}
 

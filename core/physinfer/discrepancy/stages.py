@@ -17,12 +17,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer import video
 from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
 from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.warmstart import warm_start_factory
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
+from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.pipeline import EffectParameterError, build_pipeline, fixed_by_user
@@ -224,21 +226,18 @@ def _encoded_once(
     """The calibration target's clip after its round trip through the encoder, made once."""
     import json
 
-    from physinfer.io import atomic_write_json
-    from physinfer.video import read_video, write_video
-
     path, key_path = encode_dir / "self_target.mp4", encode_dir / "self_target.json"
     key = {"params": {k: float(v) for k, v in params.items()}, "seed": int(seed),
            "render_params": dict(target.render_params)}  # fmt: skip
     if path.is_file() and key_path.is_file():
         stored = json.loads(key_path.read_text())
         if stored.get("key") == json.loads(json.dumps(key)):
-            return read_video(path, fps=stored["fps"])
+            return video.read_video(path, fps=stored["fps"])
     clip = clip_of(pipeline, params, target, seed)
     encode_dir.mkdir(parents=True, exist_ok=True)
-    write_video(path, clip)
+    video.write_video(path, clip)
     atomic_write_json(key_path, {"key": key, "fps": float(clip.fps)})
-    return read_video(path, fps=clip.fps)
+    return video.read_video(path, fps=clip.fps)
 
 
 #: Step between the optimizer seeds of successive calibration runs: any step keeps them
