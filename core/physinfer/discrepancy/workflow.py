@@ -37,8 +37,11 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from physinfer.discrepancy.calibration_stage import (
     calibrate,
@@ -70,10 +73,11 @@ from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
-from physinfer.noise import noise_seeds
+from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.outputs import OutputFolder
 from physinfer.pipeline import target_duration
 from physinfer.progress import StageProgress
+from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.scene import scene_of
@@ -178,6 +182,51 @@ def _diagnose(
         return _diagnose_stages(registry, settings, base, target, effect_objs, say, bars, pool)
 
 
+@dataclass(frozen=True)
+class _Run:
+    """One diagnosis as its stages read it: the inputs, the budgets, the target's embedding
+    and re-simulation seeds, and where progress, timings and jobs go.
+
+    Attributes:
+        registry: The loaded plugin registry (every model built for the scene).
+        settings: What to diagnose and how (the batch size and clip length resolved).
+        base: The baseline pipeline.
+        target: The target.
+        effect_objs: Every candidate effect by name, screened-out ones included.
+        say: Progress lines.
+        bars: The trial progress bars.
+        pool: The workers the stages after the baseline may run on.
+        clock: Each stage's wall time.
+        steps: The baseline's trials.
+        effect_steps: The trials of the control and of each effect's model.
+        target_label: How the stages' run records name the target.
+        target_embedding: The target's embedding.
+        seeds: The gap measurements' re-simulation seeds.
+        gaps: What every gap measurement shares.
+    """
+
+    registry: Registry
+    settings: DiagnoseSettings
+    base: Pipeline
+    target: Target
+    effect_objs: Mapping[str, Any]
+    say: Log
+    bars: StageProgress
+    pool: WorkerPool
+    clock: StageClock
+    steps: int
+    effect_steps: int
+    target_label: str
+    target_embedding: np.ndarray
+    seeds: list[int]
+    gaps: GapContext
+
+    @property
+    def common(self) -> dict[str, Any]:
+        """The keyword arguments every stage's refinement takes."""
+        return {"registry": self.registry, "settings": self.settings, "on_trial": self.bars.update}
+
+
 def _diagnose_stages(
     registry: Registry,
     settings: DiagnoseSettings,
@@ -188,134 +237,34 @@ def _diagnose_stages(
     bars: StageProgress,
     pool: WorkerPool,
 ) -> dict[str, Any]:
-    steps = settings.steps or base.phenomenon.default_steps
-    effect_steps = settings.effect_steps or steps
-    target_label = str(settings.target_path) if settings.target_path else "default"
-    target_embedding = base.embedder.embed(target.clip)
-    seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
-    gaps = GapContext(target, target_embedding, tuple(seeds), settings.out)
-    common = {"registry": registry, "settings": settings, "on_trial": bars.update}
-    clock = StageClock()
-
+    """The stages and the decision of :func:`run_diagnosis`, in order; returns the report."""
+    run = _start(registry, settings, base, target, effect_objs, say, bars, pool)
     # 1. The baseline (the workers start meanwhile, then make its re-simulations).
-    pool.warm_up()
-    resimulate = pooled_clip_embedder(pool, base, target.render_params, say)
-    say(f"[1/6] refining the baseline ({steps} trials)")
-    with clock.stage("baseline"):
-        baseline = run_stage("baseline", base, target, steps=steps, start=None, target_label=target_label,
-                             embed_clips=resimulate, **common)  # fmt: skip
-        gap0 = gaps.measure(base, baseline.best_params, "baseline", embed_clips=resimulate)
-    screened: dict[str, dict[str, Any]] = {}
-    if settings.screen:
-        from physinfer.discrepancy.screen import refined_already, screen_effects
-
-        unrefined = {name: e for name, e in effect_objs.items() if not refined_already(settings.out, name)}
-        with clock.stage("screen"):
-            screens = screen_effects(settings, base, target.render_params, baseline.best_params, gap0.embeddings,
-                                     unrefined, say, pool, n_candidates=len(effect_objs))  # fmt: skip
-        screened = {name: record for name, record in screens.items() if record["screened"]}
+    baseline, gap0 = _refine_baseline(run)
+    screened = _screen(run, baseline, gap0)
     refined = {name: effect for name, effect in effect_objs.items() if name not in screened}
     effects = list(refined)
     if settings.ridge_starts:
-        from physinfer.discrepancy.ridge import ridge_starts
-
-        with clock.stage("ridge"):
-            ridge_starts(settings, base, target.render_params, baseline.best_params, target_embedding, gap0.floor,
-                         refined, say, pool)  # fmt: skip
-
-    # The stages below start from the baseline's fit and not from each other: side by side
-    # on workers first, if there are any; the pass below then reads them from disk.
-    adopt_single_calibration(settings.out)
-    job_args = {
-        "baseline_best": baseline.best_params, "target": target, "target_embedding": target_embedding,
-        "seeds": seeds, "steps": steps, "effect_steps": effect_steps, "target_label": target_label,
-    }  # fmt: skip
-    jobs = stage_jobs(settings, effects, **job_args, calibration=first_calibration_jobs(settings, effects, pool.size, gap0.floor))
-    workers = run_on_workers(pool, jobs, bars, clock, say)
-
+        _ridge_starts(run, baseline, gap0, refined)
+    job_args, workers = _side_by_side(run, baseline, gap0, effects)
     # 2. Equal-budget control and one augmented model per effect, all warm-started.
-    say(f"[2/6] control: the baseline refined {effect_steps} more trials from its fit")
-    with clock.stage("control"):
-        stages = [
-            control_stage(base, target, baseline.best_params, gaps, effect_steps=effect_steps,
-                          target_label=target_label, **common)  # fmt: skip
-        ]
-    for name, effect in refined.items():
-        say(f"[3/6] effect {name}: {effect.description} ({effect_steps} trials, warm start)")
-        with clock.stage(f"effect-{name}"):
-            stages.append(
-                effect_stage(
-                    name, effect, base, target, baseline.best_params, gaps, effect_steps=effect_steps,
-                    target_label=target_label, **common,
-                )  # fmt: skip
-            )
-
-    # An augmented run may owe its better fit to its base parameters, not to its effect:
-    # its best θ with the effect switched off is a baseline fit too, and the best baseline
-    # fit found by any stage is what an effect must beat (ablation).
-    ablated = [ablated_stage(stage, base, gaps) for stage in stages[1:]]
-    before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
-    # The misspecification test compares like with like: with calibration controls the
-    # self-consistency gaps had the budget of the best baseline fit, without them the
-    # baseline stage's.
-    tested = float(before.gap.gap) if settings.calibrate and settings.calibration_control else float(gap0.gap)
-
-    def judged(scale: float) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
-        return judge_stages(stages, before, tested, scale, settings.rule, effect_objs)
-
+    stages = _refine_models(run, baseline, refined)
     # 4. The self-consistency runs (the null scale's optimizer part), as many as decide.
-    calibration, scale, scale_range = calibrate(
-        settings, base, baseline.best_params, target, gap0, judged, job_args, effects, common, bars, clock, say, pool
-    )
-    candidates, verdict, named = judged(scale)
-    # The runs' summary only when every run was refined (otherwise the range says what is known).
-    every_run = all("skipped" not in run for run in calibration)
-    self_gap = self_consistency_gap([run["gap"] for run in calibration], settings.rule.calibration_summary) if (
-        calibration and every_run) else None  # fmt: skip
-    say(
-        f"      gap {tested:.4g}, noise floor at the baseline fit {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
-        + ("misspecified" if verdict["gap_test"] else "within what a correct model leaves")
-    )
-    if verdict["evidence"] == ["effect"]:
-        say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
-    after = next((s for s in stages if s.label == named), before)
-    say("[5/6] " + (f"named: {named}" if named else "no effect explains the gap"))
-    remainder = remainder_after_naming(named, float(after.gap.gap), float(verdict["threshold"]))
+    found, scale_range = _decide(run, baseline, gap0, stages, job_args, effects)
+    say("[5/6] " + (f"named: {found.named}" if found.named else "no effect explains the gap"))
+    remainder = remainder_after_naming(found.named, float(found.after.gap.gap), float(found.verdict["threshold"]))
     if remainder is not None:
         say("      " + remainder["message"])
-    limits = None
-    if settings.limits:
-        runs = settings.calibration_runs if settings.calibrate else 0
-        n_sims = diagnosis_simulations(settings, [baseline, *(s.result for s in stages)], runs,
-                                        n_gaps=2 + runs * (2 if settings.calibration_control else 1)
-                                        + 2 * len(effect_objs), unrefined=len(screened))  # fmt: skip
-        limits_at = limit_scale(scale_range, gap0.floor_q95)
-        low = scale_range[0] if limits_at != scale_range[0] else None  # read there too
-        with clock.stage("limits"):
-            limits = run_limits(registry, settings, base, target, before, refined, limits_at, n_sims, say, pool,
-                                scale_low=low, n_candidates=len(effect_objs))  # fmt: skip
-        for cand in candidates:
-            lim = limits["effects"][cand["effect"]]
-            cand["detectable_from"] = lim["detectable_from"]
-            cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
-        if settings.limit_config.search_check:
-            from physinfer.discrepancy.limit_check import apply_checks, check_limits
-
-            with clock.stage("limit_check"):
-                apply_checks(candidates, check_limits(
-                    registry, settings, base, target, before.best_params, limits["effects"], refined, named,
-                    limits_at, len(effect_objs), steps, effect_steps, tuple(seeds), say))  # fmt: skip
+    limits, limits_at = _limits(run, found, screened, refined, scale_range)
     unnamed = closest_unnamed(
-        candidates, {s.label: stage_end(s, baseline.best_params) for s in stages[1:]},
-        misspecified=bool(verdict["misspecified"]), named=named, baseline_best=before.best_params,
-        effect_steps=effect_steps, clip_seconds=None if limits is None else limits.get("clip_seconds"),
+        found.candidates, {s.label: stage_end(s, baseline.best_params) for s in stages[1:]},
+        misspecified=bool(found.verdict["misspecified"]), named=found.named, baseline_best=found.before.best_params,
+        effect_steps=run.effect_steps, clip_seconds=None if limits is None else limits.get("clip_seconds"),
     )  # fmt: skip
     if unnamed is not None:
         say("      " + unnamed["message"])
     say("[6/6] localising and writing outputs")
-
-    with clock.stage("outputs"):
-        found = Findings(baseline, gap0, stages, before, after, named, candidates, verdict, scale, self_gap, calibration)
+    with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
     report["named_leaves"] = remainder
     report["unnamed"] = unnamed
@@ -329,6 +278,184 @@ def _diagnose_stages(
          "rungs": record["rungs"]}  # fmt: skip
         for name, record in screened.items()
     ]
-    report["timing"] = {"stages_s": {k: round(v, 3) for k, v in clock.seconds.items()}, **workers}
+    report["timing"] = {"stages_s": {k: round(v, 3) for k, v in run.clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
+
+
+def _start(
+    registry: Registry,
+    settings: DiagnoseSettings,
+    base: Pipeline,
+    target: Target,
+    effect_objs: Mapping[str, Any],
+    say: Log,
+    bars: StageProgress,
+    pool: WorkerPool,
+) -> _Run:
+    """The diagnosis' budgets, the target's embedding and the gap measurements' seeds, as a :class:`_Run`."""
+    steps = settings.steps or base.phenomenon.default_steps
+    target_embedding = base.embedder.embed(target.clip)
+    seeds = noise_seeds(settings.seed + 2, settings.floor_samples)
+    return _Run(
+        registry, settings, base, target, effect_objs, say, bars, pool, StageClock(), steps,
+        settings.effect_steps or steps, str(settings.target_path) if settings.target_path else "default",
+        target_embedding, seeds, GapContext(target, target_embedding, tuple(seeds), settings.out),
+    )  # fmt: skip
+
+
+def _refine_baseline(run: _Run) -> tuple[RefineResult, NoiseFloor]:
+    """The baseline refined from the centre and its gap at its best fit (re-simulated on the pool)."""
+    run.pool.warm_up()
+    resimulate = pooled_clip_embedder(run.pool, run.base, run.target.render_params, run.say)
+    run.say(f"[1/6] refining the baseline ({run.steps} trials)")
+    with run.clock.stage("baseline"):
+        baseline = run_stage("baseline", run.base, run.target, steps=run.steps, start=None,
+                             target_label=run.target_label, embed_clips=resimulate, **run.common)  # fmt: skip
+        gap0 = run.gaps.measure(run.base, baseline.best_params, "baseline", embed_clips=resimulate)
+    return baseline, gap0
+
+
+def _screen(run: _Run, baseline: RefineResult, gap0: NoiseFloor) -> dict[str, dict[str, Any]]:
+    """The candidates screened out (no fit could name them here): name → the screen's record."""
+    if not run.settings.screen:
+        return {}
+    from physinfer.discrepancy.screen import refined_already, screen_effects
+
+    unrefined = {name: e for name, e in run.effect_objs.items() if not refined_already(run.settings.out, name)}
+    with run.clock.stage("screen"):
+        screens = screen_effects(run.settings, run.base, run.target.render_params, baseline.best_params,
+                                 gap0.embeddings, unrefined, run.say, run.pool,
+                                 n_candidates=len(run.effect_objs))  # fmt: skip
+    return {name: record for name, record in screens.items() if record["screened"]}
+
+
+def _ridge_starts(run: _Run, baseline: RefineResult, gap0: NoiseFloor, refined: Mapping[str, Any]) -> None:
+    """Each refined effect's ridge probe at the baseline's fit (the effects' searches start from it)."""
+    from physinfer.discrepancy.ridge import ridge_starts
+
+    with run.clock.stage("ridge"):
+        ridge_starts(run.settings, run.base, run.target.render_params, baseline.best_params, run.target_embedding,
+                     gap0.floor, refined, run.say, run.pool)  # fmt: skip
+
+
+def _side_by_side(
+    run: _Run, baseline: RefineResult, gap0: NoiseFloor, effects: list[str]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The stages after the baseline run on the workers first, if there are any.
+
+    They start from the baseline's fit and not from each other; the pass through them here
+    then reads them from disk.
+
+    Returns:
+        The stage jobs' shared arguments (the self-consistency runs take them too) and how
+        the jobs ran.
+    """
+    adopt_single_calibration(run.settings.out)
+    job_args = {
+        "baseline_best": baseline.best_params, "target": run.target, "target_embedding": run.target_embedding,
+        "seeds": run.seeds, "steps": run.steps, "effect_steps": run.effect_steps, "target_label": run.target_label,
+    }  # fmt: skip
+    first = first_calibration_jobs(run.settings, effects, run.pool.size, gap0.floor)
+    jobs = stage_jobs(run.settings, effects, **job_args, calibration=first)
+    return job_args, run_on_workers(run.pool, jobs, run.bars, run.clock, run.say)
+
+
+def _refine_models(run: _Run, baseline: RefineResult, refined: Mapping[str, Any]) -> list[Stage]:
+    """The control (the baseline refined ``effect_steps`` more), then each refined effect's model."""
+    say, best = run.say, baseline.best_params
+    say(f"[2/6] control: the baseline refined {run.effect_steps} more trials from its fit")
+    with run.clock.stage("control"):
+        stages = [
+            control_stage(run.base, run.target, best, run.gaps, effect_steps=run.effect_steps,
+                          target_label=run.target_label, **run.common)  # fmt: skip
+        ]
+    for name, effect in refined.items():
+        say(f"[3/6] effect {name}: {effect.description} ({run.effect_steps} trials, warm start)")
+        with run.clock.stage(f"effect-{name}"):
+            stages.append(
+                effect_stage(name, effect, run.base, run.target, best, run.gaps, effect_steps=run.effect_steps,
+                             target_label=run.target_label, **run.common)  # fmt: skip
+            )
+    return stages
+
+
+def _decide(
+    run: _Run,
+    baseline: RefineResult,
+    gap0: NoiseFloor,
+    stages: list[Stage],
+    job_args: Mapping[str, Any],
+    effects: list[str],
+) -> tuple[Findings, tuple[float, float]]:
+    """The self-consistency runs a decision needs, and the decision at their null scale.
+
+    Returns:
+        What was found and decided, and the null scale's range.
+    """
+    settings, say = run.settings, run.say
+    # An augmented run may owe its better fit to its base parameters, not to its effect:
+    # its best θ with the effect switched off is a baseline fit too, and the best baseline
+    # fit found by any stage is what an effect must beat (ablation).
+    ablated = [ablated_stage(stage, run.base, run.gaps) for stage in stages[1:]]
+    before = min([stages[0], *ablated], key=lambda s: float(s.gap.gap))
+    # The misspecification test compares like with like: with calibration controls the
+    # self-consistency gaps had the budget of the best baseline fit, without them the
+    # baseline stage's.
+    tested = float(before.gap.gap) if settings.calibrate and settings.calibration_control else float(gap0.gap)
+
+    def judged(scale: float) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
+        return judge_stages(stages, before, tested, scale, settings.rule, run.effect_objs)
+
+    calibration, scale, scale_range = calibrate(
+        settings, run.base, baseline.best_params, run.target, gap0, judged, job_args, effects, run.common, run.bars,
+        run.clock, say, run.pool,
+    )  # fmt: skip
+    candidates, verdict, named = judged(scale)
+    # The runs' summary only when every run was refined (otherwise the range says what is known).
+    every_run = all("skipped" not in record for record in calibration)
+    self_gap = self_consistency_gap([record["gap"] for record in calibration], settings.rule.calibration_summary) if (
+        calibration and every_run) else None  # fmt: skip
+    say(
+        f"      gap {tested:.4g}, noise floor at the baseline fit {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
+        + ("misspecified" if verdict["gap_test"] else "within what a correct model leaves")
+    )
+    if verdict["evidence"] == ["effect"]:
+        say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
+    after = next((s for s in stages if s.label == named), before)
+    found = Findings(baseline, gap0, stages, before, after, named, candidates, verdict, scale, self_gap, calibration)
+    return found, scale_range
+
+
+def _limits(
+    run: _Run, found: Findings, screened: Mapping[str, Any], refined: Mapping[str, Any], scale_range: tuple[float, float]
+) -> tuple[dict[str, Any] | None, float | None]:
+    """Each candidate's detection limit (set on its record), checked by the search where asked.
+
+    Returns:
+        The limits' record and the null scale they assume, or ``(None, None)`` without limits.
+    """
+    settings, effect_objs = run.settings, run.effect_objs
+    if not settings.limits:
+        return None, None
+    runs = settings.calibration_runs if settings.calibrate else 0
+    n_sims = diagnosis_simulations(settings, [found.baseline, *(s.result for s in found.stages)], runs,
+                                    n_gaps=2 + runs * (2 if settings.calibration_control else 1)
+                                    + 2 * len(effect_objs), unrefined=len(screened))  # fmt: skip
+    limits_at = limit_scale(scale_range, found.gap0.floor_q95)
+    low = scale_range[0] if limits_at != scale_range[0] else None  # read there too
+    with run.clock.stage("limits"):
+        limits = run_limits(run.registry, settings, run.base, run.target, found.before, refined, limits_at, n_sims,
+                            run.say, run.pool, scale_low=low, n_candidates=len(effect_objs))  # fmt: skip
+    for cand in found.candidates:
+        lim = limits["effects"][cand["effect"]]
+        cand["detectable_from"] = lim["detectable_from"]
+        cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+    if settings.limit_config.search_check:
+        from physinfer.discrepancy.limit_check import apply_checks, check_limits
+
+        with run.clock.stage("limit_check"):
+            apply_checks(found.candidates, check_limits(
+                run.registry, settings, run.base, run.target, found.before.best_params, limits["effects"], refined,
+                found.named, limits_at, len(effect_objs), run.steps, run.effect_steps, tuple(run.seeds), run.say))  # fmt: skip
+    return limits, limits_at
