@@ -6,12 +6,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.figure import Figure  # no pyplot: no backend or global state to disturb
 
 from physinfer.io import atomic_path
 from physinfer.rundir import TrialRecord
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def plot_refinement(
@@ -45,6 +48,10 @@ def refinement_figure(
             :func:`physinfer.posterior.summary.marginals`): the 90 % interval is shaded
             and the label added to the panel's title.
     """
+    # matplotlib (about a second to import) only when a figure is drawn: refine's engine and
+    # command import this module. No pyplot: no backend or global state to disturb.
+    from matplotlib.figure import Figure
+
     steps = np.array([t.step for t in trials])
     dist = np.array([np.nan if t.distance is None else t.distance for t in trials], dtype=float)
     best = np.fmin.accumulate(np.where(np.isnan(dist), np.inf, dist))
