@@ -10,8 +10,23 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.api.options import PrepareOptions, RenderOptions, required, with_settings
+from physinfer.api.plugins import registry
+from physinfer.api.results import frames_figure
+from physinfer.conditioning import parse_roi
 from physinfer.errors import UserInputError
+from physinfer.framing import (
+    PrepareSettings,
+    default_framing,
+    overlay_figure,
+    prepare_clip,
+    save_overlay,
+)
+from physinfer.io import atomic_write_json, check_output_file
+from physinfer.meshio import load_trajectory
+from physinfer.render_estimate import estimate_render_params
+from physinfer.scene import bind_scene, resolve_scene
 from physinfer.types import Clip, check_fps
+from physinfer.video import read_video, write_video
 
 
 @dataclass
@@ -55,8 +70,6 @@ class PreparedVideo:
     def plot(self) -> Any:
         """The reference frame with the box found and the square cropped (a matplotlib
         figure; ``NAME_overlay.png`` is the same drawing)."""
-        from physinfer.framing import overlay_figure
-
         return overlay_figure(self.prepared)
 
 
@@ -79,11 +92,6 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
             JSON or overlay exists already (without ``overwrite``; checked before anything
             is read).
     """
-    from physinfer.api.plugins import registry
-    from physinfer.conditioning import parse_roi
-    from physinfer.framing import PrepareSettings, default_framing, prepare_clip
-    from physinfer.video import read_video
-
     o = with_settings(PrepareOptions, options, settings)
     target = required(o.target, "target", "the video to prepare")
     paths = None if o.out is None else output_paths(Path(o.out), target, overwrite=o.overwrite)
@@ -109,8 +117,6 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
     )
     estimate = None
     if not o.no_render_estimate:
-        from physinfer.render_estimate import estimate_render_params
-
         estimate = estimate_render_params(phenomenon, prepared.clip, embedder=embedder)
     video = PreparedVideo(plugin, target, name, prepared, estimate)
     if paths is not None:
@@ -119,10 +125,6 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
 
 
 def _write_prepared(video: PreparedVideo, paths: dict[str, Path]) -> None:
-    from physinfer.framing import save_overlay
-    from physinfer.io import atomic_write_json
-    from physinfer.video import write_video
-
     write_video(paths["video"], video.clip)
     save_overlay(video.prepared, paths["overlay"])
     video.paths = {name: str(path) for name, path in paths.items()}
@@ -135,8 +137,6 @@ def output_paths(out: Path, target: Path, *, overwrite: bool = False) -> dict[st
     ``target`` is never written over; an existing video, JSON or overlay is replaced only with
     ``overwrite``; a folder that cannot be written is refused (:func:`check_output_file`).
     """
-    from physinfer.io import check_output_file
-
     if out.suffix.lower() not in (".mp4", ".gif"):
         raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
     paths = {
@@ -200,8 +200,6 @@ class Rendering:
 
     def plot(self, n: int = 6) -> Any:
         """``n`` frames of the rendering side by side (a matplotlib figure)."""
-        from physinfer.api.results import frames_figure
-
         return frames_figure(self.clip, n)
 
 
@@ -220,17 +218,12 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
             recorded) outside 0.1-1000, a bad ζ or scene, an ``out`` that is not a video name,
             an existing ``out`` without ``overwrite``.
     """
-    from physinfer.api.plugins import registry
-    from physinfer.meshio import load_trajectory
-    from physinfer.scene import bind_scene, resolve_scene
-
     o = with_settings(RenderOptions, options, settings)
     trajectory = required(o.trajectory, "trajectory", "a trajectory NPZ or a folder of .obj meshes")
     if o.fps is not None:  # 0.1-1000 fps, before the renderer is made
         check_fps(o.fps)
     out = None if o.out is None else Path(o.out)
     if out is not None:  # the user's video stays theirs: refused before anything is rendered
-        from physinfer.io import check_output_file
 
         if out.suffix.lower() not in (".mp4", ".gif"):
             raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
@@ -249,8 +242,6 @@ def render(plugin: str, options: RenderOptions | None = None, **settings: Any) -
         renderer.close()
     rendering = Rendering(plugin, trajectory, loaded, clip, zeta, scene, seconds)
     if out is not None:
-        from physinfer.video import write_video
-
         write_video(out, clip)
         rendering.paths["video"] = str(out)
     return rendering

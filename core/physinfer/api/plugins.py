@@ -5,10 +5,10 @@ from __future__ import annotations
 import functools
 from typing import Any
 
+from physinfer.plugins import load_registry
+
 
 @functools.cache
 def registry() -> Any:
     """The registry of every installed plugin, loaded once per process."""
-    from physinfer.plugins import load_registry
-
     return load_registry()[0]

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.discrepancy.figures import gaps_figure
 from physinfer.types import Clip, Trajectory
 
 
@@ -124,8 +125,6 @@ class Diagnosis:
     def plot(self) -> Any:
         """Each model's distances to the target and its gap against the noise floor, the null
         scale and the threshold (a matplotlib figure; ``gaps.png`` is the same drawing)."""
-        from physinfer.discrepancy.figures import gaps_figure
-
         best = self.report["best_baseline"]
         models = [{"label": "baseline (best)", "gap": best["gap"], "distances": best["to_target"]}]
         models += [
