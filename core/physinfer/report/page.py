@@ -12,8 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from physinfer import __version__
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_write_text
+from physinfer.outputs import MANIFEST_FILE, folder_command
 from physinfer.report.common import Content, read_json
 from physinfer.report.diagnose_page import diagnose_content
 from physinfer.report.infer_page import infer_content
@@ -85,8 +87,6 @@ def build_report(run_dir: str | Path) -> Report:
     Raises:
         UserInputError: not a run directory, or one of its JSON files is damaged.
     """
-    from physinfer import __version__
-
     run_dir = Path(run_dir)
     kind = run_kind(run_dir)
     content: Content = _BUILDERS[kind](run_dir)
@@ -103,8 +103,6 @@ def check_owned_run(run_dir: str | Path) -> None:
     Raises:
         UserInputError: no manifest (:mod:`physinfer.outputs`), or another command's.
     """
-    from physinfer.outputs import MANIFEST_FILE, folder_command
-
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise UserInputError(

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from physinfer.adequacy import verdict_line
 from physinfer.report.common import Content, correlations, parameter_table, read_json, units_of
 from physinfer.report.markup import figure, fmt, key_values, paragraph, section, table, video
 
@@ -45,8 +46,6 @@ def refine_content(run: Path) -> Content:
 
 def adequacy_section(adequacy: Mapping[str, Any]) -> str:
     """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
-    from physinfer.adequacy import verdict_line
-
     line = verdict_line(adequacy)
     if line is None and adequacy.get("reproduces"):
         line = (
