@@ -1,6 +1,7 @@
 """The ``physinfer`` command line."""
 
-def main() -> None:
-    from physinfer.cli.app import run
+from physinfer.cli.app import run
 
+
+def main() -> None:
     run()

@@ -5,8 +5,10 @@ object on stdout; progress and logs go to stderr. User mistakes end with one lin
 stderr (and ``{"error": ...}`` on stdout with ``--json``) and exit status 2; anything
 else is a bug and ends with one line naming it and the file its traceback was saved to
 (in the system's temporary directory, never in ``--out``), exit status 1. Both go through
-:func:`handle_errors`. Heavy libraries are imported inside commands, so ``physinfer
---help`` stays fast.
+:func:`handle_errors`. ``physinfer --help`` stays fast: commands call the library through the
+package's face (``physinfer.refine``, ...), which imports the API on first use, and the few
+modules that would load a heavy library or a whole workflow are imported inside the command
+that needs them.
 
 The host's own commands live beside this module (``plugins_cmd``, ``simulate_cmd``,
 ``refine_cmd`` here; ``diagnose_cmd``, ``posterior_cmd``, ``prepare_cmd``, ``render_cmd``,
@@ -63,7 +65,7 @@ from physinfer.cli.refine_cmd import (
 )
 from physinfer.cli.simulate_cmd import simulate_cmd
 from physinfer.console import err_console
-from physinfer.plugins import PluginInfo
+from physinfer.plugins import PluginInfo, disabled_plugins
 from physinfer.registry import Entry, Registry
 
 __all__ = [
@@ -245,8 +247,6 @@ def refuse_unknown_command(cli: typer.Typer, argv: list[str]) -> None:
     plugins ``PHYSINFER_DISABLED_PLUGINS`` blocks, whose commands are missing on purpose.
     """
     import difflib
-
-    from physinfer.plugins import disabled_plugins
 
     words = [arg for arg in argv if not arg.startswith("-")]
     commands = typer.main.get_group(cli).commands

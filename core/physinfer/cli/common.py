@@ -32,20 +32,19 @@ except ImportError:  # pragma: no cover - a typer on the click package
 
 from physinfer.console import err_console
 from physinfer.errors import PhysinferError, UserInputError
+from physinfer.io import to_jsonable
+from physinfer.plugins import load_registry
+from physinfer.settings import check_seed
 
 
 @functools.cache
 def registry_and_infos() -> tuple[Any, Any]:
     """The registry of all installed plugins, built once per process."""
-    from physinfer.plugins import load_registry
-
     return load_registry()
 
 
 def emit_json(obj: Any) -> None:
     """Print one JSON object on stdout."""
-    from physinfer.io import to_jsonable
-
     sys.stdout.write(json.dumps(to_jsonable(obj), allow_nan=False) + "\n")
     sys.stdout.flush()
 
@@ -80,8 +79,6 @@ def handle_errors(
             as_json = bool(kwargs.get(as_json_param)) or _json_given()
             try:
                 if "seed" in kwargs:
-                    from physinfer.settings import check_seed
-
                     check_seed(kwargs["seed"])
                 return func(*args, **kwargs)
             except (UserInputError, PhysinferError) as exc:

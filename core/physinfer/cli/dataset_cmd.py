@@ -15,8 +15,16 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.markup import escape
 
+from physinfer import plugins
 from physinfer.cli.app import JsonOpt, SceneSetOpt, emit_json, handle_errors
 from physinfer.errors import UserInputError
+from physinfer.scene import (
+    bind_scene,
+    parse_scene_ranges,
+    parse_scene_set,
+    resolve_scene,
+    scene_text,
+)
 
 if TYPE_CHECKING:
     from physinfer.datasets import DatasetPreset, GenerateResult
@@ -155,10 +163,8 @@ def _generate(
     scene_range: Sequence[str] = (),
 ) -> GenerateResult:
     from physinfer.datasets import generate_dataset, generator_for, parse_split_counts
-    from physinfer.plugins import load_registry
-    from physinfer.scene import bind_scene
 
-    registry, _infos = load_registry()
+    registry, _infos = plugins.load_registry()
     phenomenon = registry.phenomenon(plugin)
     scene, ranges = _scene_and_ranges(phenomenon, scene_set, scene_range)
     generator = generator_for(bind_scene(phenomenon, scene), scene_ranges=ranges)
@@ -193,8 +199,6 @@ def _scene_and_ranges(
 ) -> tuple[Any, dict[str, tuple[float, float]]]:
     """The scene ``--scene-set`` gives and the settings ``--scene-range`` varies; refused when
     a setting is given both ways."""
-    from physinfer.scene import parse_scene_ranges, parse_scene_set, resolve_scene
-
     given = parse_scene_set(scene_set)
     scene = resolve_scene(phenomenon, given)
     ranges = parse_scene_ranges(phenomenon, scene_range)
@@ -214,8 +218,6 @@ def _plan_line(
     scheduler: str | None,
 ) -> str:
     """What is about to be made, of what, where, and by whom (printed before the work starts)."""
-    from physinfer.scene import scene_text
-
     sharing = f", {chosen.seeds_per_theta} seeds per θ" if chosen.seeds_per_theta > 1 else ""
     where = f"Dask at {scheduler}" if scheduler else f"{workers if workers is not None else 'all CPUs as'} workers"
     return (

@@ -12,6 +12,7 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
+import physinfer
 from physinfer.cli.app import (
     DiagnoseBatchSizeOpt,
     DurationOpt,
@@ -28,6 +29,7 @@ from physinfer.cli.app import (
     emit_json,
     err_console,
     handle_errors,
+    options_from_cli,
 )
 from physinfer.cli.options import (
     EmbedderOpt,
@@ -37,6 +39,8 @@ from physinfer.cli.options import (
     TorchDeviceOpt,
     WeightsOpt,
 )
+from physinfer.discrepancy.limit_text import screened_line
+from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 
 # The options only ``diagnose`` has, declared here so its signature reads as a list of settings.
 _TargetOpt = Annotated[
@@ -204,11 +208,8 @@ def diagnose_cmd(
 ) -> None:
     """Find where the refined model disagrees with the video and name the missing effect."""
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.app import options_from_cli
-
-    options = options_from_cli(api.DiagnoseOptions, given)
-    diagnosis = api.diagnose(
+    options = options_from_cli(physinfer.DiagnoseOptions, given)
+    diagnosis = physinfer.diagnose(
         plugin, options, log=lambda msg: err_console.print(msg, markup=False, highlight=False), progress=True
     )
     report = diagnosis.to_dict()
@@ -223,8 +224,6 @@ def diagnosis_lines(report: dict, out: Path) -> list[str]:
     """What ``diagnose`` prints (without ``--json``), as rich markup: the verdict, a line per
     effect tried (and its detection limit), the effects screened out, the effect named and
     where the results are, the time taken."""
-    from physinfer.discrepancy.limit_text import screened_line
-
     return [
         _misspecified_line(report),
         *_candidate_lines(report),
@@ -236,8 +235,6 @@ def diagnosis_lines(report: dict, out: Path) -> list[str]:
 
 def _misspecified_line(report: dict) -> str:
     """``misspecified True (by the gap test)   gap 1.2 → 0.4   (noise floor ..., null scale ...)``."""
-    from physinfer.discrepancy.needed_calibration import null_scale_words
-
     by = {"gap": "the gap test", "effect": "an effect's significant improvement"}
     because = " and ".join(by[e] for e in report["misspecified_by"])
     return (
@@ -251,8 +248,9 @@ def _misspecified_line(report: dict) -> str:
 def _candidate_lines(report: dict) -> list[str]:
     """A line per effect tried (gap, ratio, p-value, significance, parameters on a bound), then
     with ``--limits`` a line per effect with its detection limit and the null scale's note."""
+    # Imported here: the detection limits load most of the diagnosis (~45 % more start-up
+    # for --help, which imports every command module).
     from physinfer.discrepancy.limits import limit_line
-    from physinfer.discrepancy.needed_calibration import limits_scale_note
 
     lines = []
     for c in report["candidates"]:

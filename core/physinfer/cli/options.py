@@ -9,6 +9,9 @@ from typing import Annotated, Any
 
 import typer
 
+from physinfer.parameters import parse_assignments
+from physinfer.scene import parse_scene_set
+
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print exactly one JSON object on stdout.")]
 PluginOpt = Annotated[
     str, typer.Option("--plugin", "-p", help="Phenomenon to use (see `physinfer plugins`).")
@@ -114,8 +117,6 @@ DiagnoseBatchSizeOpt = Annotated[
 
 def parse_render_set(items: list[str]) -> dict[str, Any]:
     """``NAME=VALUE`` render settings; numbers become floats, ``true``/``false`` booleans."""
-    from physinfer.parameters import parse_assignments
-
     out: dict[str, Any] = {}
     for name, raw in parse_assignments(items, "--render-set").items():
         low = raw.lower()
@@ -143,8 +144,6 @@ def options_from_cli(kind: type, values: dict[str, Any]) -> Any:
     so a CLI option without its field in the API fails at once (tests/core/test_library_api.py).
     """
     import dataclasses
-
-    from physinfer.scene import parse_scene_set
 
     fields = {f.name for f in dataclasses.fields(kind)}
     settings: dict[str, Any] = {}

@@ -12,6 +12,8 @@ from rich.markup import escape
 from physinfer.cli.common import emit_json, handle_errors, registry_and_infos
 from physinfer.cli.options import JsonOpt
 from physinfer.console import err_console
+from physinfer.plugins import check_references
+from physinfer.scene import scene_settings_of
 
 
 @handle_errors()
@@ -26,8 +28,6 @@ def plugins_cmd(
     Imports every implementation the plugins name, so one that fails to import shows here;
     a name a plugin registered that physinfer or another plugin has already is listed as refused.
     """
-    from physinfer.plugins import check_references
-
     registry, infos = registry_and_infos()
     check_references(registry, infos)
     rows = _plugin_rows(registry, infos)
@@ -106,8 +106,6 @@ def _plugins_table(rows: list[dict[str, Any]]) -> Any:
 def _scene_settings(registry: Any) -> dict[str, list[dict[str, Any]]]:
     """Each loadable phenomenon's scene settings (``--scene-set``), as JSON; broken ones are
     reported in the plugin rows instead."""
-    from physinfer.scene import scene_settings_of
-
     out: dict[str, list[dict[str, Any]]] = {}
     for name in sorted(registry.entries["phenomena"]):
         try:

@@ -12,6 +12,7 @@ from typing import Annotated, Any
 import typer
 from rich.markup import escape
 
+import physinfer
 from physinfer.cli.app import (
     JsonOpt,
     NoPrepareOpt,
@@ -22,7 +23,7 @@ from physinfer.cli.app import (
     err_console,
     handle_errors,
 )
-from physinfer.cli.options import EmbedderOpt, FpsOpt, WeightsOpt
+from physinfer.cli.options import EmbedderOpt, FpsOpt, WeightsOpt, options_from_cli
 
 posterior_app = typer.Typer(
     no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False
@@ -126,11 +127,8 @@ def train_cmd(
     video takes, and check it on the held-out clips before writing; embeddings are cached beside
     the dataset."""
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.options import options_from_cli
-
-    result = api.train_posterior(
-        plugin, options_from_cli(api.PosteriorTrainOptions, given), progress=True
+    result = physinfer.train_posterior(
+        plugin, options_from_cli(physinfer.PosteriorTrainOptions, given), progress=True
     )
     if as_json:
         emit_json(result.to_dict())
@@ -226,11 +224,11 @@ def infer_cmd(
 ) -> None:
     """The posterior of one video in seconds: median, 50 % and 90 % intervals, identifiability."""
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.app import options_from_cli
+    # Imported here: the posterior workflows load torch, and adequacy the footage modules;
+    # --help imports every command module.
     from physinfer.posterior.workflow import summary_lines, trust_lines
 
-    report = api.infer(plugin, options_from_cli(api.InferOptions, given))
+    report = physinfer.infer(plugin, options_from_cli(physinfer.InferOptions, given))
     if as_json:
         emit_json(report.to_dict())
         return
@@ -279,11 +277,8 @@ def calibration_cmd(
 ) -> None:
     """Simulation-based calibration: rank histograms and coverage of the 50 % and 90 % intervals."""
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.options import options_from_cli
-
-    report = api.evaluate_calibration(
-        plugin, options_from_cli(api.CalibrationOptions, given), progress=True
+    report = physinfer.evaluate_calibration(
+        plugin, options_from_cli(physinfer.CalibrationOptions, given), progress=True
     )
     summary = report.to_dict()
     if as_json:

@@ -15,7 +15,9 @@ from typing import Annotated, Any
 import typer
 from rich.markup import escape
 
+import physinfer
 from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
+from physinfer.cli.options import options_from_cli
 
 # The options of ``prepare``, declared here so its signature reads as a list of settings.
 _TargetOpt = Annotated[
@@ -103,11 +105,8 @@ def prepare_cmd(
 ) -> None:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.options import options_from_cli
-
     with err_console.status(f"preparing {target.name}"):
-        video = api.prepare(plugin, options_from_cli(api.PrepareOptions, given))
+        video = physinfer.prepare(plugin, options_from_cli(physinfer.PrepareOptions, given))
     if as_json:
         emit_json(video.to_dict())
         return

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
+import physinfer
 from physinfer.cli.common import emit_json, handle_errors
 from physinfer.cli.options import (
     BatchSizeOpt,
@@ -31,6 +32,7 @@ from physinfer.cli.options import (
     options_from_cli,
 )
 from physinfer.console import err_console
+from physinfer.scene import scene_text
 
 #: Above this gap / noise-floor ratio the human-readable refine output suggests more search.
 NOISE_RATIO_HINT = 1.5
@@ -159,9 +161,8 @@ def refine_cmd(
 ) -> None:
     """Refine a simulation until it matches a target video; report the parameters found."""
     given = dict(locals())
-    from physinfer import api
-
-    result = api.refine(plugin, options_from_cli(api.RefineOptions, given), progress=True)
+    options = options_from_cli(physinfer.RefineOptions, given)
+    result = physinfer.refine(plugin, options, progress=True)
     summary = result.summary()
     if as_json:
         emit_json(summary)
@@ -190,6 +191,7 @@ def refine_result_lines(result: Any) -> list[str]:
 
 def _fit_lines(result: Any) -> list[str]:
     """The best distance, whether the best fit reproduces the video, the scene."""
+    # Imported here: adequacy loads the footage modules (~15 % more start-up for --help).
     from physinfer.adequacy import verdict_line
 
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
@@ -202,8 +204,6 @@ def _fit_lines(result: Any) -> list[str]:
             f"≤ {adequacy['threshold']:g})"
         )
     if result.extra.get("scene"):
-        from physinfer.scene import scene_text
-
         lines.append(f"  scene: {scene_text(result.extra['scene'])}")
     return lines
 

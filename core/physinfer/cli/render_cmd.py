@@ -14,6 +14,7 @@ from typing import Annotated
 
 import typer
 
+import physinfer
 from physinfer.cli.app import (
     JsonOpt,
     PluginOpt,
@@ -22,6 +23,7 @@ from physinfer.cli.app import (
     err_console,
     handle_errors,
 )
+from physinfer.cli.options import options_from_cli
 
 
 @handle_errors()
@@ -63,10 +65,7 @@ def render_cmd(
     flag's ``pole_height`` draws the pole of a trajectory that carries none (OBJ meshes).
     """
     given = dict(locals())
-    from physinfer import api
-    from physinfer.cli.options import options_from_cli
-
-    rendering = api.render(plugin, options_from_cli(api.RenderOptions, given))
+    rendering = physinfer.render(plugin, options_from_cli(physinfer.RenderOptions, given))
     if as_json:
         emit_json(rendering.to_dict())
     else:

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+import physinfer
 from physinfer.cli.common import emit_json, handle_errors
 from physinfer.cli.options import (
     DurationOpt,
@@ -53,12 +54,10 @@ def simulate_cmd(
 ) -> None:
     """Run one simulation and render it to a video (and/or save the trajectory)."""
     given = dict(locals())
-    from physinfer import api
-
-    options = options_from_cli(api.SimulateOptions, given)
+    options = options_from_cli(physinfer.SimulateOptions, given)
     if out is None and trajectory_out is None:
         raise UserInputError("nothing to write: give --out VIDEO and/or --trajectory-out FILE.npz")
-    sim = api.simulate(plugin, options, render=out is not None)
+    sim = physinfer.simulate(plugin, options, render=out is not None)
     if as_json:
         emit_json(sim.to_dict())
     else:
