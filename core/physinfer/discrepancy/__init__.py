@@ -2,7 +2,9 @@
 measurement disagree, which registered effect the model is missing, and how much adding
 it shrinks the gap. See ``docs/discrepancy.md`` and :func:`run_diagnosis`.
 
-Heavy modules (figures, the refinement loop) are imported on use.
+The names are imported on first use: importing any module of this package runs this face
+first, and the engine's modules here (the model file, the warm start) must not bring the
+diagnosis with them.
 """
 
 from __future__ import annotations
