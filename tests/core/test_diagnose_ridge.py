@@ -171,3 +171,23 @@ def test_a_checked_limit_replaces_the_local_one_and_says_so():
     missed = {**check, "detectable_from": None, "fraction": None, "reason": "reachable only from a start ..."}
     apply_checks([cand], {"ball_drag": missed})
     assert cand["detectable_from"] is None and "reachable only" in limit_line(cand, None, 4.0)
+
+
+def test_a_checked_limit_halves_the_bracket_the_doubling_left():
+    """Doubled from the stated limit until named, then the bracket's geometric midpoint: a
+    search that names from 0.2 of the range, stated 0.05, is checked at 0.05, 0.1, 0.2 and
+    0.141 (named only at 0.2) and its limit read as 0.2, not rounded up to the next doubling;
+    one that names from 0.12 is checked at 0.05, 0.1, 0.2, 0.141 and read as 0.141."""
+    from physinfer.discrepancy.limit_check import bracket_search
+
+    def search_naming_from(start: float):
+        return lambda f: {"fraction": f, "named": f >= start - 1e-12}
+
+    tried = bracket_search(search_naming_from(0.2), 0.05)
+    assert [round(r["fraction"], 3) for r in tried] == [0.05, 0.1, 0.2, 0.141]
+    assert min(r["fraction"] for r in tried if r["named"]) == pytest.approx(0.2)
+    tried = bracket_search(search_naming_from(0.12), 0.05)
+    assert min(r["fraction"] for r in tried if r["named"]) == pytest.approx(np.sqrt(0.02))
+    # Named at the stated limit: that check alone; named nowhere: the doublings to the far end.
+    assert [r["fraction"] for r in bracket_search(search_naming_from(0.01), 0.05)] == [0.05]
+    assert [r["fraction"] for r in bracket_search(search_naming_from(2.0), 0.3)] == [0.3, 0.6, 1.0]

@@ -126,7 +126,8 @@ _CheckLimitsOpt = Annotated[
     typer.Option(
         "--check-limits",
         help="Check each effect not named: run this diagnosis' own stages on a target made with it at its "
-        "stated limit (doubled until named, to the end of its range), so the limit is what this search names. Costly.",
+        "stated limit (doubled until named, to the end of its range, then the last bracket halved), so the limit is "
+        "what this search names. Costly.",
     ),
 ]
 _ScreenOpt = Annotated[

@@ -14,9 +14,13 @@ baseline from the centre (``steps``), its control (``effect_steps`` from its fit
 effect's ridge probe and its model's search (``effect_steps``), each gap from the same ``K``
 re-simulation seeds — and decided by the diagnosis' rule at the null scale its limits
 assume. Named: the limit stands, checked. Not named: the strength is doubled and checked
-again, up to the far end of the range (at most :data:`MAX_CHECKS` strengths); the first
-strength named is the limit, and where none is, the limit is ``None``: the local refit says
-the effect is visible, but this diagnosis' search does not name it anywhere in its range.
+again, up to the far end of the range (at most :data:`MAX_CHECKS` strengths); where none is
+named, the limit is ``None``: the local refit says the effect is visible, but this
+diagnosis' search does not name it anywhere in its range. Where a doubling was named, the
+limit lies between it and the strength before, and reading it at the top of that bracket
+overstates it by up to twice (on the bouncing ball the checked limits were 2.5 times the
+strength named half the time): the bracket is halved (:data:`BISECTIONS`, at its geometric
+midpoint, as a ratio is what a limit is judged by) and the lowest strength named is the limit.
 
 Each check is a small diagnosis of its own under ``limit-check/<effect>-<fraction>/``
 (resumable); ``limit_check.json`` holds the records. It costs about one baseline, one
@@ -60,6 +64,38 @@ CHECK_FILE = "limit_check.json"
 SEED_OFFSET = 104729
 #: Strengths checked at most: the stated limit, then doubled until named or at the far end.
 MAX_CHECKS = 5
+#: Halvings (geometric) of the bracket between the last strength not named and the first
+#: named: one leaves the limit within a factor √2 of where this search begins to name it.
+BISECTIONS = 1
+
+
+def bracket_search(check: Callable[[float], dict[str, Any]], fraction: float) -> list[dict[str, Any]]:
+    """The strengths checked for a limit stated at ``fraction`` of the range, in order.
+
+    Doubled from ``fraction`` until one is named or the far end (1) is checked (at most
+    :data:`MAX_CHECKS`); then, where a strength below the first named one was not named,
+    their bracket is halved :data:`BISECTIONS` times at its geometric midpoint.
+
+    Args:
+        check: A strength (fraction of the range) → its record, with ``named`` and ``fraction``.
+        fraction: The stated (local) limit, in ``(0, 1]``.
+
+    Returns:
+        Every check's record, in the order run.
+    """
+    ladder = [min(1.0, fraction * 2.0**i) for i in range(MAX_CHECKS)]
+    tried: list[dict[str, Any]] = []
+    for f in dict.fromkeys(ladder[: next((i + 1 for i, v in enumerate(ladder) if v >= 1.0), MAX_CHECKS)]):
+        tried.append(check(f))
+        if tried[-1]["named"]:
+            break
+    if len(tried) < 2 or not tried[-1]["named"]:
+        return tried  # the stated limit named at once, or nothing named: no bracket
+    low, high = tried[-2]["fraction"], tried[-1]["fraction"]
+    for _ in range(BISECTIONS):
+        tried.append(check(float(np.sqrt(low * high))))
+        low, high = (low, tried[-1]["fraction"]) if tried[-1]["named"] else (tried[-1]["fraction"], high)
+    return tried
 
 
 def check_one(
@@ -143,10 +179,10 @@ def check_limits(
 ) -> dict[str, dict[str, Any]]:
     """Each not-named candidate's limit checked by the diagnosis' search (cached in
     ``limit_check.json``): effect name → ``checks`` (one record per strength tried),
-    ``detectable_from`` (the first strength named, or ``None``), ``local`` (the ladder's)
+    ``detectable_from`` (the lowest strength named, or ``None``), ``local`` (the ladder's)
     and ``reason`` (where none was named)."""
     key = {"theta": {k: float(v) for k, v in theta.items()}, "scale": scale, "steps": steps, "checks": MAX_CHECKS,
-           "effect_steps": effect_steps, "seeds": list(seeds), "ridge": settings.ridge_starts,
+           "bisections": BISECTIONS, "effect_steps": effect_steps, "seeds": list(seeds), "ridge": settings.ridge_starts,
            "limits": {n: limits[n].get("fraction") for n in sorted(limits)}}  # fmt: skip
     path = settings.out / CHECK_FILE
     if (stored := read_keyed_json(path, key)) is not None:
@@ -156,16 +192,14 @@ def check_limits(
         fraction = limit.get("fraction")
         if name == named or fraction is None or not np.isfinite(fraction) or name not in effect_objs:
             continue
-        tried: list[dict[str, Any]] = []
-        ladder = [min(1.0, float(fraction) * 2.0**i) for i in range(MAX_CHECKS)]
-        for f in dict.fromkeys(ladder[: next((i + 1 for i, v in enumerate(ladder) if v >= 1.0), MAX_CHECKS)]):
+
+        def check(f: float, name: str = name) -> dict[str, Any]:
             say(f"      checking {name}'s limit: this diagnosis' stages on a target with it at {f:.3g} of its range")
-            record = check_one(registry, settings, base, target, theta, name, effect_objs[name], f, scale,
-                               n_candidates, steps, effect_steps, seeds)  # fmt: skip
-            tried.append(record)
-            if record["named"]:
-                break
-        found = next((r for r in tried if r["named"]), None)
+            return check_one(registry, settings, base, target, theta, name, effect_objs[name], f, scale,
+                             n_candidates, steps, effect_steps, seeds)  # fmt: skip
+
+        tried = bracket_search(check, float(fraction))
+        found = min((r for r in tried if r["named"]), key=lambda r: r["fraction"], default=None)
         local = moved_values(effect_objs[name].parameter_space, float(fraction))
         reason = None
         if found is None:
