@@ -19,7 +19,7 @@ from bouncing_ball_plugin import AirDrag, ball_registry, ball_target  # noqa: E4
 
 from physinfer.discrepancy.ridge import effect_paths
 from physinfer.discrepancy.starts import search_starts
-from physinfer.discrepancy.unnamed import closest_unnamed, search_end
+from physinfer.discrepancy.unnamed import LEAD_RATIO, closest_lead, closest_unnamed, search_end
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
 from physinfer.optimizers.random import RandomOptimizer
 from physinfer.parameters import ParameterSpace, ParameterSpec
@@ -95,6 +95,37 @@ def test_unnamed_says_which_came_closest_and_whether_its_search_was_trapped():
     # Nothing to say when something was named, or when the model is not misspecified.
     assert closest_unnamed([cand], {}, misspecified=True, named="drag", baseline_best={}, effect_steps=20) is None
     assert closest_unnamed([cand], {}, misspecified=False, named=None, baseline_best={}, effect_steps=20) is None
+
+
+def test_a_lead_is_reported_when_not_misspecified_but_one_candidate_took_most_of_the_gap():
+    """The flag's 32° yaw on a 2.4-s clip: the yaw model took 64 % of the gap, within the null
+    scale. Not a name; a lead, with what would settle it. Clean targets leave x0.98 or more."""
+    space = ParameterSpace([ParameterSpec("w", (0.0, 10.0)), ParameterSpec("yaw", (-60.0, 60.0), default=0.0)])
+    start = {"w": 6.0, "yaw": 0.0}
+    on = search_end(space, {"w": 6.3, "yaw": -26.0}, start, ["yaw"])
+    off = search_end(space, {"w": 6.9, "yaw": 0.0}, start, ["yaw"])
+    yaw = {"effect": "wind_yaw", "ratio": 0.36, "effect_params": {"yaw": -26.0},
+           "checks": {"beats_seed_noise": True, "beats_null_scale": False, "pays_for_parameters": True}}  # fmt: skip
+    other = {"effect": "gusts", "ratio": 1.0, "checks": {}}
+    lead = closest_lead([other, yaw], {"wind_yaw": on}, misspecified=False, named=None, effect_steps=20,
+                        clip_seconds=2.4)  # fmt: skip
+    assert lead["effect"] == "wind_yaw" and lead["effect_params"] == {"yaw": -26.0}
+    assert "yaw = -26" in lead["message"] and "--duration 4.8" in lead["message"]
+    assert lead["failed"] == ["its improvement is within the null scale"] and "\n" not in lead["message"]
+    # No lead: a misspecified model (that is ``unnamed``), a name, a small share, the effect left off.
+    assert closest_lead([yaw], {}, misspecified=True, named=None, effect_steps=20) is None
+    assert closest_lead([yaw], {}, misspecified=False, named="wind_yaw", effect_steps=20) is None
+    weak = {**yaw, "ratio": LEAD_RATIO + 0.01}
+    assert closest_lead([weak], {}, misspecified=False, named=None, effect_steps=20) is None
+    assert closest_lead([yaw], {"wind_yaw": off}, misspecified=False, named=None, effect_steps=20) is None
+    assert "--duration" not in closest_lead([yaw], {}, misspecified=False, named=None, effect_steps=20)["message"]
+    # Shown under the verdict, on the page and in the terminal.
+    from physinfer.cli.diagnose_cmd import _named_lines
+    from physinfer.report.diagnose_page import verdict
+
+    report = {"misspecified": False, "named_effect": None, "unnamed": None, "lead": lead}
+    assert "but a lead: wind_yaw" in verdict(report)
+    assert any("but a lead: wind_yaw" in line for line in _named_lines(report, Path("out")))
 
 
 # --------------------------------------------------------------------- real diagnoses

@@ -272,8 +272,9 @@ def _named_lines(report: dict, out: Path) -> list[str]:
     lines = [f"[bold]named effect[/] {named}"]
     if leaves := report.get("named_leaves"):
         lines.append(f"  [yellow]but[/] {escape(leaves['message'])}")
-    if unnamed := report.get("unnamed"):
-        lines.append(f"  {escape(unnamed['message'])}")
+    for note in (report.get("unnamed"), report.get("lead")):
+        if note:
+            lines.append(f"  {escape(note['message'])}")
     return lines
 
 

@@ -68,7 +68,7 @@ from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and
     effect_stage,
     run_stage,
 )
-from physinfer.discrepancy.unnamed import closest_unnamed, stage_end
+from physinfer.discrepancy.unnamed import closest_lead, closest_unnamed, stage_end
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
@@ -256,18 +256,24 @@ def _diagnose_stages(
     if remainder is not None:
         say("      " + remainder["message"])
     limits, limits_at = _limits(run, found, screened, refined, scale_range)
+    ends = {s.label: stage_end(s, baseline.best_params) for s in stages[1:]}
+    misspecified = bool(found.verdict["misspecified"])
+    clip_seconds = None if limits is None else limits.get("clip_seconds")
     unnamed = closest_unnamed(
-        found.candidates, {s.label: stage_end(s, baseline.best_params) for s in stages[1:]},
-        misspecified=bool(found.verdict["misspecified"]), named=found.named, baseline_best=found.before.best_params,
-        effect_steps=run.effect_steps, clip_seconds=None if limits is None else limits.get("clip_seconds"),
+        found.candidates, ends, misspecified=misspecified, named=found.named, baseline_best=found.before.best_params,
+        effect_steps=run.effect_steps, clip_seconds=clip_seconds,
     )  # fmt: skip
-    if unnamed is not None:
-        say("      " + unnamed["message"])
+    lead = closest_lead(found.candidates, ends, misspecified=misspecified, named=found.named,
+                        effect_steps=run.effect_steps, clip_seconds=clip_seconds)  # fmt: skip
+    for note in (unnamed, lead):
+        if note is not None:
+            say("      " + note["message"])
     say("[6/6] localising and writing outputs")
     with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
     report["named_leaves"] = remainder
     report["unnamed"] = unnamed
+    report["lead"] = lead
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}

@@ -88,8 +88,9 @@ def verdict(report: Mapping[str, Any]) -> str:
         lines.append("evidence: " + ", ".join(str(e) for e in report["misspecified_by"]))
     if report.get("named_leaves"):
         lines.append("but " + str(report["named_leaves"]["message"]))
-    if report.get("unnamed"):
-        lines.append(str(report["unnamed"]["message"]))
+    for note in (report.get("unnamed"), report.get("lead")):
+        if note:
+            lines.append(str(note["message"]))
     return f'<div class="{cls}">' + "<br>".join(escape(line) for line in lines) + "</div>"
 
 
