@@ -9,7 +9,8 @@ and inferred as ``physinfer infer --target target.mp4 [--scene-set ...]`` does (
 conditioned, embedded, 2,000 samples; no predictive check). ``--degraded`` adds a second
 condition per target (the flag only): the render composited over a photographic background (a frame of a
 real video from ``--photo``, else a procedural photo-like one), sensor noise of 3 grey levels
-and H.264 at CRF 35.
+and H.264 at CRF 35. ``--scene-range NAME=LO:HI`` draws that scene value per target,
+log-uniformly (seeded from ``900_000 + i``), and tells infer the drawn value (a flag's size).
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior_targets.py --targets 100 \\
         --posterior plugins/flag/physinfer_flag/data/posterior_default.safetensors --degraded --rows rows.jsonl
@@ -39,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-THETA_SEED, SIM_SEED = 700_000, 800_000
+THETA_SEED, SIM_SEED, SCENE_SEED = 700_000, 800_000, 900_000
 #: Plugins whose targets vary only some parameters, uniformly over these boxes (the others at
 #: their defaults); any other plugin's targets are drawn from the whole prior.
 TARGET_BOXES: dict[str, dict[str, tuple[float, float]]] = {
@@ -62,6 +63,22 @@ def make_target(pipeline: Any, plugin: str, index: int) -> tuple[dict[str, float
     else:
         theta = {k: float(v) for k, v in space.sample(rng, 1)[0].items()}
     return theta, pipeline.simulator.simulate(theta, seed=SIM_SEED + index)
+
+
+def parse_ranges(items: list[str]) -> dict[str, tuple[float, float]]:
+    """``["flag_length=0.9:3"]`` → ``{"flag_length": (0.9, 3.0)}``."""
+    ranges = {}
+    for item in items:
+        name, _, bounds = item.partition("=")
+        low, _, high = bounds.partition(":")
+        ranges[name.strip()] = (float(low), float(high))
+    return ranges
+
+
+def draw_scene(ranges: dict[str, tuple[float, float]], index: int) -> dict[str, float]:
+    """Target ``index``'s values of the ranged scene settings (log-uniform)."""
+    rng = np.random.default_rng(SCENE_SEED + index)
+    return {name: float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) for name, (lo, hi) in ranges.items()}
 
 
 def photo(path: str | None, size: tuple[int, int], seed: int) -> np.ndarray:
@@ -161,6 +178,8 @@ def main() -> None:
     parser.add_argument("--plugin", default="flag")
     parser.add_argument("--scene-set", action="append", default=[], metavar="NAME=VALUE",
                         help="the targets' scene (as `physinfer simulate --scene-set`), told to infer too")
+    parser.add_argument("--scene-range", action="append", default=[], metavar="NAME=LO:HI",
+                        help="draw this scene value per target (log-uniform), told to infer too")
     parser.add_argument("--targets", type=int, default=10)
     parser.add_argument("--first", type=int, default=0)
     parser.add_argument("--posterior", type=Path, action="append", default=None,
@@ -185,6 +204,7 @@ def main() -> None:
 
     registry = load_registry()[0]
     scene = parse_scene_set(args.scene_set)
+    ranges = parse_ranges(args.scene_range)
     pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=scene or None)
     names = drawn_parameters(args.plugin, pipeline.simulator.parameter_space)
     rows: list[dict[str, Any]] = []
@@ -192,6 +212,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench-targets-") as tmp:
         folder = Path(tmp)
         for i in range(args.first, args.first + args.targets):
+            if ranges:  # this target's scene: its own simulator and renderer
+                pipeline.renderer.close()
+                target_scene = {**scene, **draw_scene(ranges, i)}
+                pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=target_scene)
+            else:
+                target_scene = scene
             theta, trajectory = make_target(pipeline, args.plugin, i)
             clip = pipeline.renderer.render(trajectory, pipeline.renderer.default_render_params)
             cases = {"mp4 (as simulate writes it)": write_video(folder / f"t{i}.mp4", clip)}
@@ -204,9 +230,11 @@ def main() -> None:
             for (condition, path), posterior in product(cases.items(), args.posterior or [None]):
                 label = condition if not args.posterior or len(args.posterior) == 1 else f"{posterior.name}: {condition}"
                 row: dict[str, Any] = {"target": i, "condition": label, "theta": {k: theta[k] for k in names}}
+                if ranges:
+                    row["scene"] = {k: target_scene[k] for k in ranges}
                 try:
                     row.update(infer_row(
-                        registry, args.plugin, path, posterior, theta, names, scene, folder / f"out-{i}-{len(rows)}"
+                        registry, args.plugin, path, posterior, theta, names, target_scene, folder / f"out-{i}-{len(rows)}"
                     ))  # fmt: skip
                 except Exception as exc:  # noqa: BLE001 - a refusal is a result
                     row["refused"] = f"{type(exc).__name__}: {exc}"
@@ -217,7 +245,7 @@ def main() -> None:
                 errors = {k: round(v["error"], 4) for k, v in row.get("params", {}).items()}
                 print(f"target {i} {label}: {errors or row.get('refused')}", file=sys.stderr, flush=True)
     print(json.dumps({
-        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "posterior": [str(p) for p in args.posterior or []] or "shipped",
+        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "scene_ranges": ranges, "posterior": [str(p) for p in args.posterior or []] or "shipped",
         "first": args.first, "targets": args.targets, "summary": summarise(rows),
         "seconds": round(time.perf_counter() - started, 1),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": platform.processor()},
