@@ -12,7 +12,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from physinfer.discrepancy.candidates import augmented_pipeline
+from physinfer.discrepancy.clip_jobs import pooled_probes
 from physinfer.discrepancy.gap import measure_gap
+from physinfer.discrepancy.ladder import LimitInputs
+from physinfer.discrepancy.limits import detection_limits
 from physinfer.discrepancy.stages import Stage
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json, read_keyed_json
@@ -76,9 +79,6 @@ def run_limits(
     which each limit is read again from the same ladder (``at_lower_scale``).
     ``n_candidates``: the candidates the rule counts, screened-out ones included (``None``:
     ``effect_objs``)."""
-    from physinfer.discrepancy.ladder import LimitInputs
-    from physinfer.discrepancy.limits import detection_limits
-
     theta = before.best_params
     fixed = fixed_by_user(base, settings.fixed)
     key = _limits_key(settings, theta, scale, scale_low, effect_objs, n_candidates)
@@ -109,8 +109,6 @@ def run_limits(
         scale_low=scale_low,
         n_candidates=n_candidates,
     )
-    from physinfer.discrepancy.clip_jobs import pooled_probes
-
     pooled = pooled_probes(pool, base, target.render_params)
     if pooled is not None:
         say(f"      the ladders' clips run on {pool.where()}")  # type: ignore[union-attr] - a pool

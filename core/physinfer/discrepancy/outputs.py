@@ -9,8 +9,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.discrepancy.figures import plot_gaps, plot_maps
 from physinfer.discrepancy.gap import gap_numbers
 from physinfer.discrepancy.localise import localise
+from physinfer.discrepancy.model import ModelFile, write_model
 from physinfer.discrepancy.stages import Stage, clip_of
 from physinfer.noise import NoiseFloor
 from physinfer.pipeline import fixed_by_user, full_parameter_space
@@ -18,9 +20,9 @@ from physinfer.refinement import RefineResult
 from physinfer.roles import Target
 from physinfer.rundir import optional_settings
 from physinfer.scene import scene_of
+from physinfer.video import side_by_side, write_video
 
 if TYPE_CHECKING:
-    from physinfer.discrepancy.model import ModelFile
     from physinfer.discrepancy.settings import DiagnoseSettings
 
 
@@ -61,8 +63,6 @@ def write_outputs(settings: DiagnoseSettings, target: Target, found: Findings) -
     figures = _draw_figures(settings, rows, found)
     videos = {}
     if settings.videos:
-        from physinfer.video import side_by_side, write_video
-
         videos["side_by_side"] = str(write_video(settings.out / "side_by_side.mp4", side_by_side(clips)))
     model = _write_model_file(settings, found.after)
     return {
@@ -105,8 +105,6 @@ def _localise_fits(
 
 def _draw_figures(settings: DiagnoseSettings, rows: list[tuple[str, Any]], found: Findings) -> dict[str, str]:
     """``maps.png`` (the localisation maps' ``rows``) and ``gaps.png`` (each model's gap)."""
-    from physinfer.discrepancy.figures import plot_gaps, plot_maps
-
     before = found.before
     models = [
         {"label": s.label if s is not before else "baseline (best)", "gap": float(s.gap.gap),
@@ -124,8 +122,6 @@ def _draw_figures(settings: DiagnoseSettings, rows: list[tuple[str, Any]], found
 
 def _write_model_file(settings: DiagnoseSettings, after: Stage) -> ModelFile:
     """``model.json``: the chosen model's effects and every value, the fixed ones included."""
-    from physinfer.discrepancy.model import write_model
-
     fixed = fixed_by_user(after.pipeline, settings.fixed)
     return write_model(
         settings.out / "model.json",

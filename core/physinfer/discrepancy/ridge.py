@@ -34,6 +34,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.discrepancy.candidates import augmented_pipeline
+from physinfer.discrepancy.clip_jobs import pooled_probes
 from physinfer.discrepancy.ladder import Probe, strength_path, values_at
 from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
 from physinfer.discrepancy.starts import RIDGE_FILE
@@ -41,6 +43,7 @@ from physinfer.evaluation import squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
+from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool
@@ -181,9 +184,6 @@ def _probe_all(
     say: Log,
 ) -> dict[str, dict[str, Any]]:
     """Every effect's ridge points with ``probe`` (see :func:`ridge_starts`)."""
-    from physinfer.discrepancy.candidates import augmented_pipeline
-    from physinfer.pipeline import fixed_by_user
-
     space = base.simulator.parameter_space
     goal = np.asarray(target_embedding, dtype=np.float64)
     emb0, _ = probe.clips(base, [theta] * len(seeds), seeds)
@@ -238,8 +238,6 @@ def ridge_starts(
         say: Progress lines.
         pool: The diagnosis' workers (each clip a job when it has two or more).
     """
-    from physinfer.discrepancy.clip_jobs import pooled_probes
-
     if not effect_objs:
         return {}
     space = base.simulator.parameter_space
