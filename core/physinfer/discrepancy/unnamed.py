@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.discrepancy.candidates import warm_start
 from physinfer.parameters import ParameterSpace
 
 #: A search "ended at the baseline" when its best θ lies this close to θ̂ with the effect
@@ -71,8 +72,6 @@ def search_end(space: ParameterSpace, best: Mapping[str, float], start: Mapping[
 def stage_end(stage: Any, baseline_best: Mapping[str, float]) -> dict[str, Any]:
     """:func:`search_end` of an effect's stage (:class:`physinfer.discrepancy.stages.Stage`)
     against the baseline's fit with its effect off."""
-    from physinfer.discrepancy.candidates import warm_start
-
     effects = list(stage.pipeline.effects)
     names = [n for effect in effects for n in effect.parameter_space.names]
     start = warm_start(baseline_best, effects)

@@ -52,10 +52,13 @@ from physinfer.discrepancy.calibration_stage import (
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import remainder_after_naming, self_consistency_gap
 from physinfer.discrepancy.judge import judge_stages
+from physinfer.discrepancy.limit_check import apply_checks, check_limits
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.outputs import Findings, write_outputs
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
+from physinfer.discrepancy.ridge import ridge_starts
+from physinfer.discrepancy.screen import refined_already, screen_effects
 from physinfer.discrepancy.settings import DiagnoseSettings
 from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
     GapContext,
@@ -79,6 +82,7 @@ from physinfer.pipeline import target_duration
 from physinfer.progress import StageProgress
 from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
+from physinfer.report import write_report_quietly
 from physinfer.roles import Target
 from physinfer.scene import scene_of
 from physinfer.target import load_target
@@ -127,9 +131,7 @@ def run_diagnosis(registry: Registry, settings: DiagnoseSettings, *, log: Log | 
             report["target_conditions"] = target.conditions
         report["wall_time_s"] = time.perf_counter() - start_time
         atomic_write_json(settings.out / "diagnosis.json", report)
-        from physinfer.report import write_report_quietly  # report.html; a failure only warns
-
-        write_report_quietly(settings.out)
+        write_report_quietly(settings.out)  # report.html; a failure only warns
     return report
 
 
@@ -326,8 +328,6 @@ def _screen(run: _Run, baseline: RefineResult, gap0: NoiseFloor) -> dict[str, di
     """The candidates screened out (no fit could name them here): name → the screen's record."""
     if not run.settings.screen:
         return {}
-    from physinfer.discrepancy.screen import refined_already, screen_effects
-
     unrefined = {name: e for name, e in run.effect_objs.items() if not refined_already(run.settings.out, name)}
     with run.clock.stage("screen"):
         screens = screen_effects(run.settings, run.base, run.target.render_params, baseline.best_params,
@@ -338,8 +338,6 @@ def _screen(run: _Run, baseline: RefineResult, gap0: NoiseFloor) -> dict[str, di
 
 def _ridge_starts(run: _Run, baseline: RefineResult, gap0: NoiseFloor, refined: Mapping[str, Any]) -> None:
     """Each refined effect's ridge probe at the baseline's fit (the effects' searches start from it)."""
-    from physinfer.discrepancy.ridge import ridge_starts
-
     with run.clock.stage("ridge"):
         ridge_starts(run.settings, run.base, run.target.render_params, baseline.best_params, run.target_embedding,
                      gap0.floor, refined, run.say, run.pool)  # fmt: skip
@@ -458,8 +456,6 @@ def _limits(
         cand["detectable_from"] = lim["detectable_from"]
         cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
     if settings.limit_config.search_check:
-        from physinfer.discrepancy.limit_check import apply_checks, check_limits
-
         with run.clock.stage("limit_check"):
             apply_checks(found.candidates, check_limits(
                 run.registry, settings, run.base, run.target, found.before.best_params, limits["effects"], refined,
