@@ -15,6 +15,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.noise import noise_seeds
+from physinfer.plotting import refinement_figure
 from physinfer.rundir import TrialRecord
 
 
@@ -141,6 +142,4 @@ class RefineResult:
     def plot(self, max_params: int = 17) -> Any:
         """Distance and every parameter against the step, with the 90 % intervals shaded and
         the truth dashed where known (a matplotlib figure; ``refinement.png`` is the same)."""
-        from physinfer.plotting import refinement_figure
-
         return refinement_figure(self.trials, self.ground_truth, max_params=max_params, bands=self.posterior or None)

@@ -40,6 +40,7 @@ from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's hist
     naming_effects,
     target_duration,
 )
+from physinfer.plotting import plot_refinement  # imports matplotlib when it draws
 from physinfer.posterior.refined import posterior_start, report_posterior
 from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
@@ -360,8 +361,6 @@ def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_
     """Write ``result.json``, the refinement plot, the best trajectory and the side-by-side video,
     then ask the report for ``report.html``: the refine command's files (the loop writes only
     its run directory's trial log)."""
-    from physinfer.plotting import plot_refinement  # matplotlib: a second to import
-
     best_traj = pipeline.simulator.simulate(result.best_params, seed=seed)
     best_traj.save(run_dir.path / "best_trajectory.npz")
     best_clip = pipeline.renderer.render(best_traj, target.render_params)

@@ -49,10 +49,20 @@ from physinfer.api.options import (
 )
 from physinfer.api.plugins import registry
 from physinfer.api.results import Diagnosis, Simulation
+from physinfer.discrepancy.decide import DecisionRule
+from physinfer.discrepancy.settings import DiagnoseSettings, LimitConfig
+from physinfer.discrepancy.workflow import run_diagnosis
 from physinfer.errors import UserInputError
+from physinfer.io import check_output_file
+from physinfer.outputs import OutputFolder
+from physinfer.parameters import parse_float_assignments
+from physinfer.pipeline import build_pipeline, naming_effects
+from physinfer.progress import StageProgress
 from physinfer.refinement import RefineResult
+from physinfer.scene import scene_of
 from physinfer.session import run as run_refine
 from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
+from physinfer.video import write_video
 
 __all__ = [
     "CalibrationOptions",
@@ -114,10 +124,6 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
             (an existing file without ``overwrite``, a ``trajectory_out`` not ``*.npz``, a
             folder that cannot be written), refused before anything is simulated.
     """
-    from physinfer.parameters import parse_float_assignments
-    from physinfer.pipeline import build_pipeline, naming_effects
-    from physinfer.scene import scene_of
-
     o = with_settings(SimulateOptions, options, settings)
     effects = as_names(o.effects, "effects")
     out, trajectory_out = _optional(o.out), _optional(o.trajectory_out)
@@ -150,8 +156,6 @@ def simulate(plugin: str, options: SimulateOptions | None = None, **settings: An
         sim.clip, sim.render_params = pipeline.renderer.render(trajectory, zeta), zeta
         sim.seconds["render"] = time.perf_counter() - t1
     if out is not None:
-        from physinfer.video import write_video
-
         write_video(out, sim.clip)
         sim.paths["video"] = str(out)
     pipeline.renderer.close()
@@ -163,8 +167,6 @@ def _check_simulate_outputs(
 ) -> None:
     """Refuse outputs ``simulate`` must not write, before it simulates (two names for one
     file cannot pass: one must end ``.mp4``/``.gif``, the other ``.npz``)."""
-    from physinfer.io import check_output_file
-
     if out is not None:
         if out.suffix.lower() not in (".mp4", ".gif"):
             raise UserInputError(f"--out {out}: write a .mp4 or .gif file")
@@ -249,10 +251,6 @@ def diagnose(
         progress: Draw a progress bar per stage on stderr.
         **settings: Fields of :class:`DiagnoseOptions`.
     """
-    from physinfer.discrepancy.decide import DecisionRule
-    from physinfer.discrepancy.limits import LimitConfig
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
-
     o = with_settings(DiagnoseOptions, options, settings)
     out = _optional(o.out) or _default_out(f"diagnose-{plugin}")
     diagnose_settings = DiagnoseSettings(
@@ -313,8 +311,7 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
         The :class:`~physinfer.posterior.workflow.PosteriorReport`: ``marginals`` (median,
         50 % and 90 % intervals, label per parameter), ``to_dict()`` and ``plot()``.
     """
-    from physinfer.outputs import OutputFolder
-    from physinfer.posterior.workflow import infer as run
+    from physinfer.posterior.workflow import infer as run  # torch, sbi
 
     o = with_settings(InferOptions, options, settings)
     out = _optional(o.out) or _default_out(f"infer-{plugin}")
@@ -346,8 +343,6 @@ def _staged_progress(progress: StagedProgress) -> Iterator[Callable[[str, int, i
     if callable(progress):
         yield progress
         return
-    from physinfer.progress import StageProgress
-
     with StageProgress(bool(progress)) as bars:
         yield bars.update
 
@@ -376,8 +371,7 @@ def train_posterior(
         The :class:`~physinfer.posterior.train_workflow.TrainResult`: ``estimator``, ``path``,
         ``to_dict()`` and ``plot()`` (the validation loss per epoch).
     """
-    from physinfer.io import check_output_file
-    from physinfer.posterior.estimator import NetworkConfig
+    from physinfer.posterior.estimator import NetworkConfig  # torch
     from physinfer.posterior.train_workflow import train_posterior as run
 
     o = with_settings(PosteriorTrainOptions, options, settings)
@@ -421,8 +415,7 @@ def evaluate_calibration(
         The :class:`~physinfer.posterior.calibrate_workflow.CalibrationReport`: coverage,
         ranks, median errors and contraction per parameter, ``to_dict()`` and ``plot()``.
     """
-    from physinfer.outputs import OutputFolder
-    from physinfer.posterior.calibrate_workflow import evaluate_calibration as run
+    from physinfer.posterior.calibrate_workflow import evaluate_calibration as run  # torch, sbi
 
     o = with_settings(CalibrationOptions, options, settings)
     data = required(o.data, "data", "a dataset of held-out simulations (physinfer dataset generate)")

@@ -18,7 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+from physinfer.conditioning import Conditioning, parse_roi
 from physinfer.errors import UserInputError
+from physinfer.settings import check_counts, check_seed
 
 Assignments = Mapping[str, Any] | Sequence[str]
 
@@ -84,10 +86,8 @@ class FootageOptions:
     no_prepare: bool = False
     roi: str | tuple[float, float, float, float] | None = None
 
-    def conditioning(self, *, estimate_render: bool = False) -> Any:
+    def conditioning(self, *, estimate_render: bool = False) -> Conditioning:
         """The :class:`~physinfer.conditioning.Conditioning` these options ask for."""
-        from physinfer.conditioning import Conditioning, parse_roi
-
         roi = parse_roi(self.roi) if isinstance(self.roi, str) else self.roi
         if roi is not None and len(roi) != 4:
             raise UserInputError(f"roi {roi!r}: give x, y, w, h in the video's pixels")
@@ -406,8 +406,6 @@ def with_settings(
             (naming the closest one), a ``seed`` outside 0..2**32-1, or a count of
             :data:`physinfer.settings.COUNT_LIMITS` (``samples``, ``embedder_frames``) out of range.
     """
-    from physinfer.settings import check_counts, check_seed
-
     base = kind() if options is None else options
     if not isinstance(base, kind):
         raise UserInputError(f"options: expected {kind.__name__}, got {type(base).__name__}")

@@ -12,15 +12,21 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.adequacy import predictive_check
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.parameters import ParameterSpace
+from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator
+from physinfer.posterior.figures import corner_figure, corner_plot
 from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
-from physinfer.posterior.summary import correlations, marginals
+from physinfer.posterior.summary import correlations, format_marginal, marginals
 from physinfer.registry import Registry
+from physinfer.report import write_report_quietly
 from physinfer.roles import Target
+from physinfer.scene import default_scene, resolve_scene
+from physinfer.target import load_target
 from physinfer.threads import with_refinement_threads
 
 
@@ -68,8 +74,6 @@ class PosteriorReport:
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
         physical units with the truth marked where known (a matplotlib figure; ``corner.png``)."""
-        from physinfer.posterior.figures import corner_figure
-
         if self.space is None:
             raise ValueError("this report carries no parameter space to draw in")
         return corner_figure(self, self.space, title=title)
@@ -180,9 +184,6 @@ def infer(
         UserInputError: a mismatched or damaged estimator (another scene included), a
             target too short for it, an unreadable video.
     """
-    from physinfer.scene import default_scene
-    from physinfer.target import load_target
-
     if n_samples < 100:
         raise UserInputError(
             f"--samples {n_samples}: at least 100 samples are needed for intervals"
@@ -240,8 +241,6 @@ def _load_estimator(
     scene_set: Mapping[str, Any] | None,
 ) -> _LoadedEstimator:
     """Resolve the scene, load the estimator, check its scene and rebuild its embedder."""
-    from physinfer.scene import resolve_scene
-
     phenomenon = registry.phenomenon(plugin)
     scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
     estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
@@ -260,9 +259,6 @@ def _check_adequacy(
     seed: int,
 ) -> None:
     """Simulate the posterior's median and set ``report.adequacy`` (and its time in ``seconds``)."""
-    from physinfer.adequacy import predictive_check
-    from physinfer.pipeline import build_pipeline
-
     median = report.space.from_unit(np.median(report.samples_unit, axis=0))
     config = loaded.estimator.config
     checked = loaded.pipeline if not loaded.scene else build_pipeline(
@@ -278,8 +274,6 @@ def write_report(
     report: PosteriorReport, estimator: PosteriorEstimator, out: Path, *, title: str = ""
 ) -> None:
     """``posterior.json``, ``samples.npz`` (physical and normalised) and ``corner.png`` in ``out``."""
-    from physinfer.posterior.figures import corner_plot
-
     out.mkdir(parents=True, exist_ok=True)
     space = estimator.parameter_space
     physical = np.stack(
@@ -301,9 +295,7 @@ def write_report(
         report.notes.append(f"corner plot skipped: the posterior is degenerate ({report.degenerate})")
     report.paths["posterior"] = str(out / "posterior.json")
     atomic_write_json(out / "posterior.json", report.to_dict())
-    from physinfer.report import write_report_quietly  # report.html; a failure only warns
-
-    write_report_quietly(out)
+    write_report_quietly(out)  # report.html; a failure only warns
 
 
 def _first_clause(exc: Exception) -> str:
@@ -339,8 +331,6 @@ def trust_lines(report: PosteriorReport) -> list[str]:
 def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Printed lines: one per identified or weakly identified parameter, then one line
     naming every parameter the video does not determine (their numbers are in the JSON)."""
-    from physinfer.posterior.summary import format_marginal
-
     shown = [
         format_marginal(name, m) for name, m in marginals_.items() if m["label"] == "identified"
     ]
@@ -382,8 +372,6 @@ def posterior_for_refinement(
         ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
         phenomenon ships no estimator).
     """
-    from physinfer.scene import default_scene
-
     phenomenon = registry.phenomenon(plugin)
     if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
         return None, None
