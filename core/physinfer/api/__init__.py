@@ -328,6 +328,7 @@ def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> 
             seed=o.seed,
             device=o.device,
             scene_set=o.scene_set,
+            render_set=dict(o.render_set),
             check=o.check,
             conditioning=o.conditioning(),
         )
@@ -389,7 +390,8 @@ def train_posterior(
             registry(), plugin=plugin, data=data, out=out, embedder=o.embedder,
             embedder_frames=o.embedder_frames, weights=_optional(o.weights), device=o.device,
             split=o.split, network=network, seed=o.seed, as_given=not o.stored,
-            accept_miscalibrated=o.accept_miscalibrated, progress=report,
+            accept_miscalibrated=o.accept_miscalibrated, render_inputs=as_names(o.render_inputs, "render_inputs"),
+            told_camera=o.told_camera, progress=report,
         )  # fmt: skip
 
 

@@ -237,6 +237,9 @@ class InferOptions(TargetOptions, FootageOptions):
         seed: Seed of the sampling.
         device: torch device.
         scene_set: The scene's known settings; an estimator trained on another scene is refused.
+        render_set: The camera and light the video was taken with, ``{NAME: VALUE}``: an
+            estimator told the camera (``render_inputs``) needs them all, and the phenomenon's
+            shipped one is chosen when they are given.
         check: Simulate the posterior's median and say whether the model reproduces the video
             (``adequacy``; two simulations, seconds on the flag).
     """
@@ -248,6 +251,7 @@ class InferOptions(TargetOptions, FootageOptions):
     seed: int = 0
     device: str | None = None
     scene_set: Mapping[str, Any] = field(default_factory=dict)
+    render_set: Mapping[str, Any] = field(default_factory=dict)
     check: bool = True
 
 
@@ -273,6 +277,9 @@ class PosteriorTrainOptions:
         device: torch device (``None``: CUDA when present, else CPU).
         stored: Train on the stored renders as they are, instead of the clips as users
             give videos (camera effects, H.264 and ``infer``'s conditioning; the default).
+        render_inputs: Render settings (camera, light) the estimator is told, each clip's
+            from the dataset; ``infer`` then needs them (``render_set``).
+        told_camera: Tell it every numeric render setting the dataset varies.
         accept_miscalibrated: Write an estimator that fails its held-out check (its
             intervals miss the truth too often or collapse), with the check recorded.
     """
@@ -291,6 +298,8 @@ class PosteriorTrainOptions:
     ensemble: int = 1
     device: str | None = None
     stored: bool = False
+    render_inputs: tuple[str, ...] = ()
+    told_camera: bool = False
     accept_miscalibrated: bool = False
 
 

@@ -93,6 +93,23 @@ _StoredOpt = Annotated[
         "camera effects, H.264 and infer's conditioning).",
     ),
 ]
+_RenderInputOpt = Annotated[
+    list[str],
+    typer.Option(
+        "--render-input",
+        help="A render setting (camera, light) the estimator is told, from each clip's recorded ζ "
+        "(repeatable); infer then needs it with --render-set.",
+    ),
+]
+_ToldCameraOpt = Annotated[
+    bool,
+    typer.Option(
+        "--told-camera",
+        help="Tell the estimator every numeric render setting the dataset varies (the flag: camera "
+        "angles, field of view, framing, light): sharper when the camera is known; infer then needs them "
+        "all with --render-set.",
+    ),
+]
 _AcceptMiscalibratedOpt = Annotated[
     bool,
     typer.Option(
@@ -120,6 +137,8 @@ def train_cmd(
     ensemble: _EnsembleOpt = 1,
     device: DeviceOpt = None,
     stored: _StoredOpt = False,
+    render_inputs: _RenderInputOpt = [],  # noqa: B006
+    told_camera: _ToldCameraOpt = False,
     accept_miscalibrated: _AcceptMiscalibratedOpt = False,
     as_json: JsonOpt = False,
 ) -> None:
@@ -148,6 +167,11 @@ def trained_lines(result: Any) -> list[str]:
     else:
         how = f"{epochs} epochs (validation loss {losses:.3f})"
     lines = [f"trained on {t['pairs']} clips in {how}; wrote {result.path}"]
+    told = result.estimator.config.render_inputs
+    if told:
+        lines.append(
+            f"told the render settings {', '.join(told)}: infer needs them with --render-set NAME=VALUE"
+        )
     constant = result.to_dict()["constant_inputs"]
     if constant:
         lines.append(
@@ -194,6 +218,14 @@ _InferOverwriteOpt = Annotated[
         "is refused).",
     ),
 ]
+_InferRenderSetOpt = Annotated[
+    list[str],
+    typer.Option(
+        "--render-set",
+        help="The camera and light the video was taken with, NAME=VALUE (repeatable): an estimator told "
+        "them (posterior train --told-camera) needs them; the plugin's shipped one for them is then used.",
+    ),
+]
 _CheckOpt = Annotated[
     bool,
     typer.Option(
@@ -217,6 +249,7 @@ def infer_cmd(
     overwrite: _InferOverwriteOpt = False,
     device: DeviceOpt = None,
     scene_set: SceneSetOpt = [],  # noqa: B006
+    render_set: _InferRenderSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
     check: _CheckOpt = True,

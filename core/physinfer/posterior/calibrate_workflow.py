@@ -129,7 +129,7 @@ def evaluate_calibration(
         pairs = embed_dataset(
             data, split, pipeline.embedder, embedder_info, as_given=path,
             on_progress=lambda done, total, label=label: progress(f"embedding {label}", done, total),
-        )  # fmt: skip
+        ).with_render_inputs(c.render_inputs)  # fmt: skip
         t1 = time.perf_counter()
         report = _calibrate_pairs(
             estimator, pairs, n_samples, seed, progress,

@@ -32,7 +32,7 @@ from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
 from physinfer.parameters import ParameterSpace
 from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
-from physinfer.posterior.inputs import check_inputs
+from physinfer.posterior.inputs import check_inputs, render_context, render_outside
 from physinfer.scene import default_scene, same_scene, scene_context, scene_remedy, scene_text
 
 FORMAT_NAME = "physinfer-posterior"
@@ -120,7 +120,8 @@ class EstimatorConfig:
             another embedder (or other weights) apart at inference.
         clip_seconds: Length of the training clips; a shorter target cannot be embedded alike.
         parameters: The parameter space (``ParameterSpace.to_dict()``).
-        x_dim: Input dimension: the embedding's ``E``, plus one per ranged scene setting.
+        x_dim: Input dimension: the embedding's ``E``, plus one per ranged scene setting and
+            one per told render setting.
         network: The density estimator's settings.
         prior: The prior θ was drawn from; the flow models ``atanh`` of the normalised θ.
         training: How it was trained (dataset, pairs, epochs, losses, seed), informative.
@@ -143,6 +144,12 @@ class EstimatorConfig:
             trained for; ``None`` for estimators older than the check.
         held_out: The check ``posterior train`` made on held-out clips as given
             (:mod:`physinfer.posterior.held_out`), or ``None``.
+        render_inputs: ``{name: [low, high]}``: render settings ζ (the camera, the light)
+            the estimator takes as inputs after the scene settings (``posterior train
+            --render-input``), each scaled from the training clips' range to ``[-1, 1]``
+            (:func:`physinfer.posterior.inputs.render_context`); ``infer`` needs them all
+            (``--render-set``). ``None``: it averages over the training clips' ζ (absent
+            from the files of such estimators, which are written as before).
     """
 
     plugin: str
@@ -171,6 +178,7 @@ class EstimatorConfig:
     targets: dict[str, Any] | None = None
     inputs: dict[str, Any] | None = None
     held_out: dict[str, Any] | None = None
+    render_inputs: dict[str, list[float]] | None = None
 
     @property
     def parameter_space(self) -> ParameterSpace:
@@ -179,12 +187,14 @@ class EstimatorConfig:
 
     @property
     def embedding_dim(self) -> int:
-        """``E``: the embedding's share of :attr:`x_dim` (the rest are scene settings)."""
-        return self.x_dim - len(self.scene_ranges or {})
+        """``E``: the embedding's share of :attr:`x_dim` (the rest are scene and render settings)."""
+        return self.x_dim - len(self.scene_ranges or {}) - len(self.render_inputs or {})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         d = asdict(self)
+        if d["render_inputs"] is None:  # an estimator told no ζ is written byte for byte as before
+            del d["render_inputs"]
         d["format"], d["version"] = FORMAT_NAME, FORMAT_VERSION
         return d
 
@@ -219,19 +229,58 @@ class PosteriorEstimator:
         """The parameter space θ lives in."""
         return self.config.parameter_space
 
-    def condition(self, embedding: np.ndarray, scene: Mapping[str, Any] | None) -> np.ndarray:
+    def condition(
+        self,
+        embedding: np.ndarray,
+        scene: Mapping[str, Any] | None,
+        render: Mapping[str, Any] | None = None,
+    ) -> np.ndarray:
         """``(x_dim,)`` what to sample at: the embedding, then the ranged scene settings of
-        ``scene`` (a complete scene; only read when the estimator was trained across ranges)."""
+        ``scene`` (a complete scene; only read when the estimator was trained across ranges),
+        then the told render settings ``render`` (the user's ``--render-set``; only read when
+        the estimator takes render inputs).
+
+        Raises:
+            UserInputError: a scene or render setting the estimator takes is not given.
+        """
         x = np.asarray(embedding, dtype=np.float32).reshape(-1)
         ranges = self.config.scene_ranges
-        if not ranges:
-            return x
-        if scene is None or any(name not in scene for name in ranges):
-            raise UserInputError(
-                f"this posterior estimator takes the scene settings {', '.join(sorted(ranges))}; give "
-                "them with --scene-set"
-            )
-        return np.concatenate([x, np.asarray(scene_context(ranges, scene), dtype=np.float32)])
+        if ranges:
+            if scene is None or any(name not in scene for name in ranges):
+                raise UserInputError(
+                    f"this posterior estimator takes the scene settings {', '.join(sorted(ranges))}; give "
+                    "them with --scene-set"
+                )
+            x = np.concatenate([x, np.asarray(scene_context(ranges, scene), dtype=np.float32)])
+        told = self.config.render_inputs
+        if told:
+            self.check_render(render)
+            x = np.concatenate([x, np.asarray(render_context(told, render or {}), dtype=np.float32)])
+        return x
+
+    def check_render(self, render: Mapping[str, Any] | None) -> None:
+        """Refuse to answer without every render setting the estimator takes.
+
+        Raises:
+            UserInputError: naming the missing settings, their training ranges and how to
+                give them, or to use an estimator that averages over the camera.
+        """
+        told = self.config.render_inputs or {}
+        missing = sorted(name for name in told if name not in (render or {}))
+        if not missing:
+            return
+        spans = ", ".join(f"{name} ({told[name][0]:g}..{told[name][1]:g})" for name in missing)
+        raise UserInputError(
+            f"this posterior estimator is told the camera and light: it needs the render settings "
+            f"{', '.join(sorted(told))}, and {spans} {'was' if len(missing) == 1 else 'were'} not given",
+            remedy="give each with --render-set NAME=VALUE (the values the video was taken with), or use an "
+            "estimator that averages over the camera (the plugin's default: drop --posterior)",
+        )
+
+    def render_outside(self, render: Mapping[str, Any] | None) -> list[str]:
+        """The told render settings outside the training clips' ranges
+        (:func:`physinfer.posterior.inputs.render_outside`; empty for an estimator told none)."""
+        return render_outside(self.config.render_inputs, render or {})
 
     def input_check(self, x: np.ndarray) -> tuple[np.ndarray, dict[str, Any] | None]:
         """``(x, record)``: the estimator's input checked against its training inputs

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ from physinfer.datasets.storage import MANIFEST_FILE, file_digest
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_save_npz
 from physinfer.parameters import ParameterSpace
+from physinfer.posterior.inputs import render_context
 from physinfer.roles import Embedder
 from physinfer.scene import scene_context
 from physinfer.types import Clip
@@ -49,6 +50,12 @@ class EmbeddedSet:
         scene_ranges: The scene settings the dataset varied (``--scene-range``), or ``{}``.
         context: ``(N, C)`` float32 those settings of each clip
             (:func:`physinfer.scene.scene_context`; ``C`` = 0 without ranges).
+        as_given: How the clips reached the embedder (the target path's identity), or ``None``.
+        render_params: ζ of each clip (the dataset's record), or empty.
+        render_inputs: ``{name: [low, high]}``: the render settings the estimator is told,
+            appended to the conditions after the scene context
+            (:func:`physinfer.posterior.inputs.render_context`); empty: none
+            (:meth:`with_render_inputs` sets them).
     """
 
     parameter_space: ParameterSpace
@@ -59,17 +66,44 @@ class EmbeddedSet:
     scene_ranges: dict[str, list[float]] = field(default_factory=dict)
     context: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.float32))
     as_given: dict[str, Any] | None = None
+    render_params: tuple[Mapping[str, Any], ...] = ()
+    render_inputs: Mapping[str, list[float]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
     @property
     def conditions(self) -> np.ndarray:
-        """``(N, E + C)`` what the estimator is conditioned on: the embedding, then the
-        ranged scene settings (a dataset of one scene: the embedding alone)."""
-        if self.context.size == 0:
+        """``(N, E + C + R)`` what the estimator is conditioned on: the embedding, then the
+        ranged scene settings, then the told render settings (a dataset of one scene and an
+        estimator told nothing: the embedding alone)."""
+        parts = [self.x]
+        if self.context.size:
+            parts.append(self.context)
+        if self.render_inputs:
+            told = [render_context(self.render_inputs, zeta) for zeta in self.render_params]
+            parts.append(np.asarray(told, dtype=np.float32).reshape(len(self), len(self.render_inputs)))
+        if len(parts) == 1:
             return self.x
-        return np.concatenate([self.x, self.context], axis=1).astype(np.float32)
+        return np.concatenate(parts, axis=1).astype(np.float32)
+
+    def with_render_inputs(self, ranges: Mapping[str, list[float]] | None) -> EmbeddedSet:
+        """These pairs conditioned on the clips' render settings ``ranges`` too (``None``
+        or empty: as they are).
+
+        Raises:
+            UserInputError: the clips' ζ were not recorded, or lack a setting.
+        """
+        if not ranges:
+            return self
+        missing = sorted({name for name in ranges for zeta in self.render_params if name not in zeta})
+        if len(self.render_params) != len(self) or missing:
+            raise UserInputError(
+                f"the clips of {self.cache.parent.parent} do not record the render settings "
+                f"{', '.join(missing or sorted(ranges))} the estimator takes; use a dataset made by "
+                "`physinfer dataset generate`"
+            )
+        return replace(self, render_inputs={k: list(v) for k, v in sorted(ranges.items())})
 
     @property
     def theta(self) -> np.ndarray:
@@ -166,6 +200,7 @@ def embed_dataset(
         dict(dataset.scene_ranges),
         _scene_context(dataset),
         as_given.identity() if as_given else None,
+        tuple(row.get("render_params") or {} for row in dataset.rows),
     )
 
 

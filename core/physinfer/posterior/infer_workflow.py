@@ -19,6 +19,7 @@ from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.parameters import ParameterSpace
 from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator
+from physinfer.posterior.inputs import MAX_OUTSIDE_SHARE
 from physinfer.posterior.figures import corner_figure, corner_plot
 from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
 from physinfer.posterior.summary import correlations, format_marginal, marginals
@@ -53,6 +54,7 @@ class PosteriorReport:
         degenerate: Why the posterior is degenerate (every sample of a parameter at one
             value), or ``None``.
         notes: What was left out of the results and why (a corner plot not drawn).
+        render_set: The render settings the user told (``--render-set``), when given.
     """
 
     marginals: dict[str, dict[str, Any]]
@@ -70,6 +72,7 @@ class PosteriorReport:
     inputs: dict[str, Any] | None = None
     degenerate: str | None = None
     notes: list[str] = field(default_factory=list)
+    render_set: dict[str, Any] | None = None
 
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
@@ -90,6 +93,8 @@ class PosteriorReport:
         }
         if self.scene is not None:
             d["scene"] = self.scene
+        if self.render_set:
+            d["render_set"] = self.render_set
         if self.target_conditions:
             d["target_conditions"] = self.target_conditions
         if self.adequacy is not None:
@@ -118,11 +123,17 @@ def posterior_of_clip(
     n_samples: int = 5000,
     seed: int = 0,
     scene: Mapping[str, Any] | None = None,
+    render: Mapping[str, Any] | None = None,
 ) -> PosteriorReport:
     """Sample the posterior of one clip and summarise it; ``scene``: the target's complete
-    scene, which an estimator trained across scene ranges takes as input."""
+    scene, which an estimator trained across scene ranges takes as input; ``render``: the
+    render settings the user told, which an estimator told the camera takes (one outside
+    its training ranges is reported in ``inputs`` as ``render_outside``, extrapolating)."""
     t0 = time.perf_counter()
-    x, inputs = estimator.input_check(estimator.condition(embed_target(estimator, embedder, clip), scene))
+    x, inputs = estimator.input_check(estimator.condition(embed_target(estimator, embedder, clip), scene, render))
+    if estimator.config.render_inputs and inputs is not None:
+        inputs["render_outside"] = estimator.render_outside(render)
+        inputs["extrapolating"] = inputs["extrapolating"] or bool(inputs["render_outside"])
     t1 = time.perf_counter()
     samples = estimator.sample_unit(x, n_samples, seed=seed)
     t2 = time.perf_counter()
@@ -168,6 +179,7 @@ def infer(
     scene_set: Mapping[str, Any] | None = None,
     conditioning: Conditioning | None = None,
     check: bool = True,
+    render_set: Mapping[str, Any] | None = None,
 ) -> PosteriorReport:
     """The posterior of one video (default: the plugin's embedded target), written to ``out``:
     ``posterior.json``, ``samples.npz`` and ``corner.png``.
@@ -178,7 +190,10 @@ def infer(
     ``scene_set``: the target's known scene settings (``--scene-set``); an estimator
     trained on clips of another scene is refused. ``conditioning``: how a ``target_path``
     video is framed (:mod:`physinfer.conditioning`; ζ is not estimated: the amortized
-    posterior was trained across ζ); ``None``: used as it is.
+    posterior was trained across ζ); ``None``: used as it is. ``render_set``: the camera and
+    light the video was taken with (``--render-set``): an estimator told the camera needs
+    them (and the shipped one is chosen when they are given), the predictive check renders
+    with them.
 
     Raises:
         UserInputError: a mismatched or damaged estimator (another scene included), a
@@ -191,22 +206,24 @@ def infer(
     out = Path(out)
     check_output_dir(out)
     t_start = time.perf_counter()
-    loaded = _load_estimator(registry, plugin, posterior, device, scene_set)
+    loaded = _load_estimator(registry, plugin, posterior, device, scene_set, render_set)
     if conditioning is not None:
         conditioning = replace(conditioning, estimate_render=False)
-    target = load_target(
-        loaded.pipeline, target_path, fps=fps, truth=truth, render_set={}, conditioning=conditioning
-    )
+    target = load_target(  # checks the render settings' names and values against the renderer
+        loaded.pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, conditioning=conditioning
+    )  # fmt: skip
+    told = {name: target.render_params[name] for name in render_set or {}}  # as the renderer types them
     t_ready = time.perf_counter()
     report = posterior_of_clip(
         loaded.estimator, loaded.pipeline.embedder, target.clip, n_samples=n_samples, seed=seed,
-        scene=loaded.scene or default_scene(loaded.phenomenon),
+        scene=loaded.scene or default_scene(loaded.phenomenon), render=told,
     )  # fmt: skip
     if check:
         _check_adequacy(report, registry, plugin, loaded, target, device, seed)
     report.estimator = loaded.path
     report.truth = dict(target.truth) if target.truth else None
     report.scene = loaded.scene
+    report.render_set = told or None
     report.target_conditions = target.conditions
     report.seconds["start_up"] = t_ready - t_start
     write_report(report, loaded.estimator, out, title=target.description)
@@ -239,11 +256,13 @@ def _load_estimator(
     posterior: Path | None,
     device: str | None,
     scene_set: Mapping[str, Any] | None,
+    render_set: Mapping[str, Any] | None = None,
 ) -> _LoadedEstimator:
-    """Resolve the scene, load the estimator, check its scene and rebuild its embedder."""
+    """Resolve the scene, load the estimator (the shipped one told the camera when
+    ``render_set`` tells it), check its scene and rebuild its embedder."""
     phenomenon = registry.phenomenon(plugin)
     scene = resolve_scene(phenomenon, scene_set)  # a typo is refused before the estimator loads
-    estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
+    estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene, render=render_set)
     estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
     return _LoadedEstimator(phenomenon, scene, estimator, path, pipeline)
@@ -315,7 +334,13 @@ def trust_lines(report: PosteriorReport) -> list[str]:
             "one: measure it with `physinfer refine --no-posterior`, or train on clips like it"
         )
     inputs = report.inputs or {}
-    if inputs.get("extrapolating"):
+    render_outside = inputs.get("render_outside") or []
+    if render_outside:
+        lines.append(
+            f"warning: the camera told with --render-set lies outside the estimator's training clips "
+            f"({'; '.join(render_outside)}): the intervals are extrapolated, not calibrated for it"
+        )
+    if inputs.get("extrapolating") and (not render_outside or inputs["outside"] > MAX_OUTSIDE_SHARE * inputs["dimensions"]):
         lines.append(
             f"warning: the video's embedding lies outside the estimator's training clips in {inputs['outside']} "
             f"of {inputs['dimensions']} inputs (up to {inputs['worst_sd']:g} training SDs): the intervals are "

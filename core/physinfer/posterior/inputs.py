@@ -1,5 +1,7 @@
 """What an estimator's training inputs looked like, and how a target's input compares: the
-guard against a video the estimator was never trained for.
+guard against a video the estimator was never trained for; and the render settings ζ an
+estimator may be told (the camera and light), scaled as its inputs and checked against the
+training clips' ranges.
 
 An estimator records, per input dimension, the training inputs' 0.1 and 99.9 % quantiles,
 mean and spread (:func:`input_statistics`, in its file). At inference :func:`check_inputs`
@@ -9,9 +11,12 @@ far the input lies outside the training range.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
+from physinfer.errors import UserInputError
 
 #: A target whose input lies outside the training inputs in more than this share of its
 #: dimensions is reported as extrapolated (its interval is not calibrated for it).
@@ -88,3 +93,83 @@ def check_inputs(stats: dict[str, Any] | None, x: np.ndarray) -> tuple[np.ndarra
 def checked_rows(stats: dict[str, Any] | None, xs: np.ndarray) -> np.ndarray:
     """``(B, D)`` the inputs ``xs`` after :func:`check_inputs`, row by row (held-out sets)."""
     return np.stack([check_inputs(stats, row)[0] for row in np.asarray(xs)])
+
+
+# ------------------------------------------------------------------ told render settings ζ
+#
+# An estimator may take some of the render settings ζ (camera, light) as inputs after the
+# embedding: the user who knows the camera tells it (``infer --render-set``), and the posterior
+# no longer has to average over the cameras the training clips were rendered with. Each told
+# setting is mapped linearly from the training clips' range to [-1, 1].
+
+#: A told value beyond the training clips' range by more than this share of it is outside.
+RENDER_MARGIN = 0.02
+
+
+def _number(value: Any) -> float | None:
+    """``value`` as a finite float, or ``None`` when it is no number (a texture, a vector)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+        return None
+    number = float(value)
+    return number if np.isfinite(number) else None
+
+
+def varied_render_settings(render_params: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The numeric render settings (one number each) that vary across ``render_params``,
+    sorted: the camera and light a dataset randomised (``posterior train --told-camera``)."""
+    names = set().union(*(zeta.keys() for zeta in render_params)) if render_params else set()
+    varied = []
+    for name in sorted(names):
+        values = [_number(zeta.get(name)) for zeta in render_params]
+        if all(v is not None for v in values) and max(values) > min(values):  # type: ignore[type-var]
+            varied.append(name)
+    return varied
+
+
+def render_ranges(names: Sequence[str], render_params: Sequence[Mapping[str, Any]]) -> dict[str, list[float]]:
+    """``{name: [low, high]}`` (sorted by name): the range of each render setting ``names``
+    over the training clips' ζ ``render_params``.
+
+    Raises:
+        UserInputError: a name the clips' ζ lacks or holds as no number (the numeric ones
+            that vary are listed), or one that never varied (telling it adds nothing).
+    """
+    usable = varied_render_settings(render_params)
+    ranges: dict[str, list[float]] = {}
+    for name in sorted(set(names)):
+        values = [_number(zeta.get(name)) for zeta in render_params]
+        if any(v is None for v in values) or name not in usable:
+            why = "never varies in" if all(v is not None for v in values) else "is not a number in every ζ of"
+            raise UserInputError(
+                f"--render-input {name}: the setting {why} the training clips, so the estimator cannot "
+                "learn from it",
+                remedy=f"take one the dataset varies: {', '.join(usable) or 'none'} (or --told-camera for all)",
+            )
+        ranges[name] = [float(min(values)), float(max(values))]  # type: ignore[type-var]
+    return ranges
+
+
+def render_context(ranges: Mapping[str, Sequence[float]], told: Mapping[str, Any]) -> list[float]:
+    """The told render settings as an estimator's extra inputs: each mapped linearly from its
+    training range to ``[-1, 1]`` (sorted by name)."""
+    context = []
+    for name in sorted(ranges):
+        low, high = (float(v) for v in ranges[name])
+        value = _number(told[name])
+        if value is None:
+            raise UserInputError(f"--render-set {name}={told[name]!r}: give a finite number")
+        context.append(2.0 * (value - low) / (high - low) - 1.0)
+    return context
+
+
+def render_outside(ranges: Mapping[str, Sequence[float]] | None, told: Mapping[str, Any]) -> list[str]:
+    """The told render settings beyond the training range (by more than :data:`RENDER_MARGIN`
+    of it): ``["fov_deg=60 (trained on 30.1..49.9)", ...]``, empty when all lie within."""
+    outside = []
+    for name in sorted(ranges or {}):
+        low, high = (float(v) for v in ranges[name])  # type: ignore[index]
+        value = _number(told.get(name))
+        margin = RENDER_MARGIN * (high - low)
+        if value is not None and not low - margin <= value <= high + margin:
+            outside.append(f"{name}={value:g} (trained on {low:g}..{high:g})")
+    return outside

@@ -62,13 +62,18 @@ def load_estimator(
     device: str | None = None,
     *,
     scene: Mapping[str, Any] | None = None,
+    render: Mapping[str, Any] | None = None,
 ) -> tuple[PosteriorEstimator, Path]:
     """The estimator at ``path`` or the phenomenon's shipped one, checked against ``plugin``.
 
     Without ``path``: the shipped default estimator, or, for a ``scene`` it was not trained
     on, the first of the phenomenon's ``scene_posteriors`` that covers the scene (the
-    default's refusal is raised when none does). A given ``path`` is not checked against
-    ``scene`` here: callers call :meth:`PosteriorEstimator.check_scene`.
+    default's refusal is raised when none does). A shipped estimator that takes render
+    settings (:attr:`~physinfer.posterior.estimator.EstimatorConfig.render_inputs`) is
+    chosen first when ``render`` (the user's ``--render-set``) gives every one of them
+    within its training ranges and it covers the scene; otherwise such estimators are
+    passed over. A given ``path`` is not checked against ``scene`` here: callers call
+    :meth:`PosteriorEstimator.check_scene`.
 
     Raises:
         UserInputError: no estimator given and none shipped, or one made for another
@@ -82,36 +87,64 @@ def load_estimator(
                 f"the plugin {plugin!r} ships no posterior estimator; train one with `physinfer posterior "
                 f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
             )
-        estimator, path = _shipped_for_scene(phenomenon, Path(shipped), scene, resolve_device(device))
+        device = resolve_device(device)
+        told = _shipped_told(phenomenon, scene, render, device) if render else None
+        estimator, path = told or _shipped_for_scene(phenomenon, Path(shipped), scene, device)
     else:
         estimator = PosteriorEstimator.load(path, device=resolve_device(device))
     estimator.check_for(plugin, phenomenon.parameter_space, path)
     return estimator, Path(path)
 
 
+def _shipped_told(
+    phenomenon: Any, scene: Mapping[str, Any] | None, render: Mapping[str, Any], device: str
+) -> tuple[PosteriorEstimator, Path] | None:
+    """The first of the ``scene_posteriors`` that takes render settings, all of which
+    ``render`` gives within its training ranges, and that covers ``scene``; or ``None``."""
+    for path in _shipped_others(phenomenon):
+        estimator = PosteriorEstimator.load(path, device=device)
+        told = estimator.config.render_inputs
+        if not told or any(name not in render for name in told) or estimator.render_outside(render):
+            continue
+        try:
+            estimator.check_scene(phenomenon, scene, path)
+        except UserInputError:
+            continue
+        return estimator, path
+    return None
+
+
+def _shipped_others(phenomenon: Any) -> list[Path]:
+    """The phenomenon's ``scene_posteriors`` that exist."""
+    return [Path(p) for p in getattr(phenomenon, "scene_posteriors", ()) or () if Path(p).is_file()]
+
+
 def _shipped_for_scene(
     phenomenon: Any, default: Path, scene: Mapping[str, Any] | None, device: str
 ) -> tuple[PosteriorEstimator, Path]:
     """The first shipped estimator (the default, then ``scene_posteriors``) that covers
-    ``scene``; the default when none is shipped for other scenes (its refusal is then the
-    caller's to raise).
+    ``scene`` and takes no render settings; the default when none is shipped for other
+    scenes (its refusal is then the caller's to raise).
 
     Raises:
         UserInputError: scene estimators are shipped but none covers ``scene``: the
             default's refusal, with what the others cover.
     """
-    others = [Path(p) for p in getattr(phenomenon, "scene_posteriors", ()) or () if Path(p).is_file()]
     first = PosteriorEstimator.load(default, device=device)
     refusals: list[str] = []
-    for path in [default, *others]:
+    found_others = False
+    for path in [default, *_shipped_others(phenomenon)]:
         estimator = first if path == default else PosteriorEstimator.load(path, device=device)
+        if path != default and estimator.config.render_inputs:
+            continue  # told the camera: chosen only when the user tells it (_shipped_told)
+        found_others = found_others or path != default
         try:
             estimator.check_scene(phenomenon, scene, path)
         except UserInputError as exc:
             refusals.append(str(exc) if path == default else _coverage(estimator, path, phenomenon))
             continue
         return estimator, path
-    if not others:
+    if not found_others:
         return first, default
     raise UserInputError(f"{refusals[0]} (the plugin's other shipped estimators: {'; '.join(refusals[1:])})")
 

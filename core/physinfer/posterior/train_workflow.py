@@ -4,6 +4,7 @@ it) and train q(θ | s(x)) on the (θ, embedding) pairs; the result and where it
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator, res
 from physinfer.posterior.features import TargetPath, embed_dataset
 from physinfer.posterior.fingerprint import embedder_probe, probe_clip
 from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
-from physinfer.posterior.inputs import checked_rows
+from physinfer.posterior.inputs import checked_rows, render_ranges, varied_render_settings
 from physinfer.posterior.loading import ProgressFn, build_embedder, check_dataset, no_progress
 from physinfer.posterior.training import train_estimator
 from physinfer.registry import Registry
@@ -48,6 +49,7 @@ class TrainResult:
             "training": c.training,
             "scene": c.scene,
             "scene_ranges": c.scene_ranges,
+            "render_inputs": c.render_inputs,
             "embeddings_cache": str(self.cache),
             "targets": c.targets,
             "constant_inputs": len((c.inputs or {}).get("constant", [])),
@@ -87,6 +89,8 @@ def train_posterior(
     seed: int = 0,
     as_given: bool = True,
     accept_miscalibrated: bool = False,
+    render_inputs: Sequence[str] = (),
+    told_camera: bool = False,
     progress: ProgressFn = no_progress,
 ) -> TrainResult:
     """Embed a dataset's clips (cached beside it) and train q(θ | s(x)) with sbi's NPE.
@@ -100,16 +104,23 @@ def train_posterior(
     whose 90 % intervals miss the truth too often or collapse to points is refused, with
     what to change, unless ``accept_miscalibrated`` (then written, with the check recorded).
 
+    ``render_inputs``: render settings ζ the estimator is told (each clip's, from the
+    dataset; ``infer`` then needs them with ``--render-set``); ``told_camera``: every numeric
+    setting the training clips vary (the camera and the light), with ``render_inputs``.
+    Neither: the estimator averages over the clips' ζ, as before.
+
     Raises:
         UserInputError: a dataset of another phenomenon or without θ, clips shorter than
             the embedder reads, grayscale clips for an embedder that reads colour, too few
-            clips, or an estimator that fails the held-out check.
+            clips, a render input the clips do not vary, or an estimator that fails the
+            held-out check.
     """
     network = network or NetworkConfig()
     network.validate()  # before the slow embedding
     out = _estimator_path(out)
     dataset = ClipDataset(data, split)
     check_dataset(dataset, plugin)
+    told = _told_ranges(dataset, render_inputs, told_camera)  # before the slow embedding
     pipeline = build_embedder(
         registry, plugin, embedder=embedder, embedder_frames=embedder_frames, weights=weights, device=device
     )
@@ -123,7 +134,7 @@ def train_posterior(
     pairs = embed_dataset(
         data, split, emb, embedder_info, as_given=path,
         on_progress=lambda done, total: progress("embedding", done, total),
-    )  # fmt: skip
+    ).with_render_inputs(told)  # fmt: skip
     t1 = time.perf_counter()
     estimator = train_estimator(
         pairs, identity, network=network, seed=seed, device=resolve_device(device),
@@ -141,6 +152,21 @@ def train_posterior(
     return TrainResult(
         estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1, "held_out_check": t3 - t2}
     )
+
+
+def _told_ranges(dataset: Any, render_inputs: Sequence[str], told_camera: bool) -> dict[str, list[float]]:
+    """``{name: [low, high]}`` of the render settings the estimator is told (``--render-input``,
+    and with ``--told-camera`` every numeric one the training clips vary), over the training
+    clips' ζ; empty when none is told."""
+    zetas = dataset.render_params
+    names = [*render_inputs, *(varied_render_settings(zetas) if told_camera else ())]
+    if told_camera and not names:
+        raise UserInputError(
+            f"--told-camera: the clips of {dataset.root} were all rendered with one camera and light",
+            remedy="drop --told-camera, or generate a dataset whose renders vary (dataset generate without "
+            "a fixed --render-set)",
+        )
+    return render_ranges(names, zetas) if names else {}
 
 
 def _checked_clip_seconds(dataset: Any, data: Path, embedder: Any, name: str) -> float:
@@ -232,7 +258,7 @@ def _check_held_out(
     pairs = embed_dataset(
         data, held, embedder, embedder_info, as_given=path,
         on_progress=lambda done, total: progress("held-out clips", done, total),
-    )  # fmt: skip
+    ).with_render_inputs(estimator.config.render_inputs)  # fmt: skip
     rows = slice(0, min(len(pairs), MAX_CLIPS))
     x = checked_rows(estimator.config.inputs, pairs.conditions[rows])
     samples = estimator.sample_unit_batched(x, SAMPLES, seed=0)

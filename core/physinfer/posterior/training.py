@@ -47,7 +47,8 @@ def train_estimator(
     """Train q(θ | s(x)) on ``pairs`` with sbi's NPE.
 
     Args:
-        pairs: θ (normalised) and embeddings of the training clips.
+        pairs: θ (normalised) and embeddings of the training clips (with the render
+            settings the estimator is told, :meth:`EmbeddedSet.with_render_inputs`).
         identity: The :class:`EstimatorConfig` fields naming plugin, embedder (name, frames,
             fps, probe) and clip length.
         network: Density estimator and training settings.
@@ -99,6 +100,7 @@ def train_estimator(
         scene_ranges={k: list(v) for k, v in pairs.scene_ranges.items()} or None,
         targets={"as_given": dict(pairs.as_given)} if pairs.as_given else None,
         inputs=input_statistics(pairs.conditions),
+        render_inputs={k: list(v) for k, v in pairs.render_inputs.items()} or None,
     )
     config = replace(config, training={**config.training, **training})
     trained = PosteriorEstimator(config, estimator.cpu(), "cpu")
