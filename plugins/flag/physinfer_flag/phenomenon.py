@@ -24,6 +24,9 @@ DEFAULT_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_defaul
 #: The shipped estimator for flags of other sizes: trained across 0.9-3 m × 0.6-2 m flags
 #: (``make posterior-sizes``), it takes the flag's size (``--scene-set``) as input.
 SIZES_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_sizes.safetensors"
+#: The shipped estimator told the camera and light (``make posterior-camera``): chosen by
+#: ``infer --render-set`` giving them all, sharper than the default, which averages over them.
+CAMERA_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_camera.safetensors"
 
 #: Ground truth of the embedded target: wind and area weight off-centre, bending at 1×.
 DEFAULT_TRUTH_BASE = {"wind_speed": 6.5, "area_weight": 0.12}
@@ -158,7 +161,7 @@ def make_phenomenon() -> Phenomenon:
         default_steps=40,
         default_steps_with_posterior=16,  # 20 held-out targets: 16 trials beat 40 (docs/benchmarks.md)
         default_posterior=str(DEFAULT_POSTERIOR),
-        scene_posteriors=(str(SIZES_POSTERIOR),),
+        scene_posteriors=(str(SIZES_POSTERIOR), str(CAMERA_POSTERIOR)),
         framing=framing,
         scene_settings=SCENE_SETTINGS,
     )
