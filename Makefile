@@ -24,7 +24,7 @@ export PYOPENGL_PLATFORM ?= egl
 # pyglet (imported by pyrender) looks for an X display unless told it is headless.
 export PYGLET_HEADLESS ?= 1
 
-.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes posterior-pendulum posterior-hanging-cloth clean
+.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes posterior-camera posterior-pendulum posterior-hanging-cloth clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -107,6 +107,20 @@ posterior: install
 		--out plugins/flag/physinfer_flag/data/posterior_default.safetensors --overwrite
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior --device cpu \
 		--out runs/flag-posterior-calibration
+
+# The flag's shipped estimator told the camera and light (chosen by infer --render-set): the
+# dataset and cached embeddings of `posterior` (the generate line resumes), each clip's six numeric
+# render settings (camera angles, field of view, framing, light, ambient) appended to its
+# embedding (--told-camera), five seeded MAFs (about 8 min on 2 cores); then its calibration.
+posterior-camera: install
+	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 800,0,200 --renders-per-sim 1 \
+		--frames 60 --size 224 --gray --seed 21 --out runs/flag-posterior
+	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior --device cpu --seed 0 \
+		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 --told-camera \
+		--out plugins/flag/physinfer_flag/data/posterior_camera.safetensors --overwrite
+	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior --device cpu \
+		--posterior plugins/flag/physinfer_flag/data/posterior_camera.safetensors \
+		--out runs/flag-posterior-camera-calibration
 
 # The flag's shipped estimator for other sizes: 800 + 200 simulations whose flag length and
 # height are drawn per simulation (log-uniform, 0.9-3 m × 0.6-2 m; about 20 min on 2 cores),
