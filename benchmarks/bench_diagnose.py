@@ -120,16 +120,16 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     """Simulate, render and write one target; returns its true parameters.
 
     ``strength``: the hidden effect's parameters that far along their path from off to the
-    far end of their range (:func:`physinfer.discrepancy.limits.strength_path`; the power
+    far end of their range (:func:`physinfer.discrepancy.ladder.strength_path`; the power
     curves) instead of a random realistic strength.
     """
-    from physinfer.session import build_pipeline
+    from physinfer.pipeline import build_pipeline
     from physinfer.video import write_video
 
     pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
     truth, rng = base_truth(pipeline.phenomenon.parameter_space, seed)
     if hidden and strength is not None:
-        from physinfer.discrepancy.limits import strength_path, values_at
+        from physinfer.discrepancy.ladder import strength_path, values_at
 
         effect_space = pipeline.effects[0].parameter_space
         truth.update(values_at(effect_space, *strength_path(effect_space), strength))
@@ -169,9 +169,11 @@ def ladder_case(registry: Any, plugin: str, seed: int, args: argparse.Namespace)
     """
     from physinfer.discrepancy.candidates import augmented_pipeline
     from physinfer.discrepancy.decide import DecisionRule
-    from physinfer.discrepancy.limits import LimitConfig, LimitInputs, detection_limits
+    from physinfer.discrepancy.ladder import LimitInputs
+    from physinfer.discrepancy.limits import detection_limits
+    from physinfer.discrepancy.settings import LimitConfig
     from physinfer.noise import measure_noise_floor, noise_seeds
-    from physinfer.session import build_pipeline
+    from physinfer.pipeline import build_pipeline
 
     t0 = time.perf_counter()
     base = build_pipeline(registry, plugin, embedder=args.embedder, embedder_frames=args.embedder_frames)
@@ -220,7 +222,8 @@ def run_case(plugin: str, hidden: str | None, seed: int, args: argparse.Namespac
     unless ``--no-screen``); a screened-out candidate is recorded as not significant."""
     import functools
 
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
     from physinfer.io import atomic_write_json
 
     registry = load_bench_registry(args.frames)
@@ -594,7 +597,7 @@ def plot_power(summaries: list[dict[str, Any]], registry: Any, plugin: str, path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from physinfer.discrepancy.limits import strength_path, values_at
+    from physinfer.discrepancy.ladder import strength_path, values_at
 
     fig, axes = plt.subplots(1, len(summaries), figsize=(4.2 * len(summaries), 4.0), squeeze=False)
     for ax, summ in zip(axes[0], summaries, strict=True):

@@ -50,8 +50,8 @@ def run_case(out: Path, seed: int, drag: float, args: argparse.Namespace) -> dic
     """Diagnose one target (or read its row back)."""
     from bouncing_ball_plugin import ball_registry, ball_target
 
-    from physinfer.discrepancy.limits import LimitConfig
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings, LimitConfig
+    from physinfer.discrepancy.workflow import run_diagnosis
 
     case = out / f"seed{seed}-drag{drag:g}"
     row_file = case / ("case-checked.json" if args.check_limits else "case.json")

@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
-from physinfer.loop import squared_distance
+from physinfer.evaluation import squared_distance
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
-from physinfer.session import build_pipeline
 
 
 def groups(names: list[str], wind: float) -> dict[str, tuple[dict[str, float], dict[str, float]]]:

@@ -52,8 +52,8 @@ from real_conditions import (  # noqa: E402
 )
 
 from physinfer.errors import UserInputError  # noqa: E402
+from physinfer.evaluation import squared_distance  # noqa: E402
 from physinfer.framing import PrepareSettings, prepare_clip  # noqa: E402
-from physinfer.loop import squared_distance  # noqa: E402
 from physinfer.types import Clip, Trajectory  # noqa: E402
 
 THETA_SEED, SIM_SEED = 300_000, 400_000

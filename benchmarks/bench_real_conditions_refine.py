@@ -47,10 +47,10 @@ import bench_refine  # noqa: E402
 
 from physinfer.conditioning import Conditioning, condition_target  # noqa: E402
 from physinfer.framing import PrepareSettings, prepare_clip  # noqa: E402
+from physinfer.pipeline import build_pipeline  # noqa: E402
 from physinfer.plugins import load_registry  # noqa: E402
 from physinfer.render_estimate import estimate_render_params  # noqa: E402
 from physinfer.roles import Target  # noqa: E402
-from physinfer.session import build_pipeline  # noqa: E402
 
 ARMS = {
     "oracle": "oracle ζ, clean",

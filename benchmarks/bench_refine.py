@@ -57,11 +57,12 @@ import numpy as np
 
 from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
-from physinfer.loop import RefineConfig, run_refinement
+from physinfer.loop import run_refinement
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
+from physinfer.refinement import RefineConfig
 from physinfer.roles import Target
 from physinfer.rundir import RunDirectory
-from physinfer.session import build_pipeline
 
 THETA_SEED, TARGET_SIM_SEED = 100_000, 200_000
 

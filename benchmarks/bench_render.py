@@ -1,6 +1,6 @@
 """Flag rendering speed: milliseconds per frame at steady state, 224×224, textured flag, background, pole.
 
-Renders a synthetic waving 1.5 m × 1 m flag (:func:`physinfer_flag.render.waving_sheet`,
+Renders a synthetic waving 1.5 m × 1 m flag (:func:`physinfer_flag.flag_scene.waving_sheet`,
 32 × 21 vertices like the cloth simulator's default grid) with :class:`FlagRenderer`.
 The first call (EGL context, shader compilation, texture upload) is timed on its own.
 Steady state is measured on whole ``render`` calls after it: ``ms_per_frame`` is
@@ -69,12 +69,9 @@ def breakdown(renderer: Any, trajectory: Any, zeta: dict[str, Any]) -> dict[str,
     import numpy as np
 
     from physinfer_flag.backgrounds import background_image
-    from physinfer_flag.render import (
-        DoubleSidedSheet,
-        FlagRenderParams,
-        composite_over,
-        measure_flag,
-    )
+    from physinfer_flag.flag_scene import measure_flag
+    from physinfer_flag.render_params import FlagRenderParams
+    from physinfer_flag.sheet_render import DoubleSidedSheet, composite_over
 
     params = FlagRenderParams.from_mapping(zeta)
     sheet = DoubleSidedSheet(trajectory.faces, trajectory.vertices.shape[1])
@@ -98,7 +95,8 @@ def breakdown(renderer: Any, trajectory: Any, zeta: dict[str, Any]) -> dict[str,
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Time the renderer; returns the JSON record."""
     import physinfer_flag.render as flag_render
-    from physinfer_flag.render import FlagRenderer, waving_sheet
+    from physinfer_flag.flag_scene import waving_sheet
+    from physinfer_flag.render import FlagRenderer
 
     if args.pyrender_shader:
         flag_render.MESH_SHADERS = None  # contexts are created with pyrender's own shaders

@@ -37,10 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from physinfer.conditioning import Conditioning
-from physinfer.loop import squared_distance
+from physinfer.evaluation import squared_distance
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.roles import Target
-from physinfer.session import build_pipeline, refine
+from physinfer.session import refine
 
 
 def truth_at(space, wind: float) -> dict[str, float]:

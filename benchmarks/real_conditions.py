@@ -56,7 +56,9 @@ def render_rgba(renderer: Any, trajectory: Trajectory, zeta: dict[str, Any]) -> 
 
     Uses the flag renderer's scene building; only the compositing is left out.
     """
-    from physinfer_flag.render import DoubleSidedSheet, FlagRenderParams, measure_flag
+    from physinfer_flag.flag_scene import measure_flag
+    from physinfer_flag.render_params import FlagRenderParams
+    from physinfer_flag.sheet_render import DoubleSidedSheet
 
     params = FlagRenderParams.from_mapping(zeta)
     height, width = params.size
@@ -75,7 +77,7 @@ def composite(
 ) -> np.ndarray:
     """``(T, H, W, 3)``: ``rgba`` frames put at ``xy`` on ``background`` (``(H + 2m, W + 2m, 3)``
     with a margin ``m`` for the shake), the view moved by ``shifts`` ``(T, 2)`` whole pixels."""
-    from physinfer_flag.render import composite_over
+    from physinfer_flag.sheet_render import composite_over
 
     n, side = rgba.shape[0], rgba.shape[1]
     margin = 8

@@ -21,42 +21,27 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.evaluation import (  # noqa: F401 - re-exported: the loop's evaluation API
-    NON_FINITE,
-    NON_FINITE_DISTANCE,
-    ClipEmbedder,
-    Pipeline,
-    evaluate,
-    evaluate_batch,
-    evaluate_mean,
-    make_clips,
-    simulate_and_embed,
-    simulate_many,
-    simulate_one,
-    squared_distance,
-)
-from physinfer.refinement import RefineConfig, RefineResult
-from physinfer.resimulation import (  # noqa: F401 - re-exported: the loop's re-simulations
-    SELECTION_SEED_SALT,
-    final_noise_floor,
-    observation_noise,
-    select_best,
-)
+from physinfer.evaluation import evaluate_batch
+from physinfer.moved import moved_names
+from physinfer.refinement import RefineResult
+from physinfer.resimulation import final_noise_floor, observation_noise, select_best
 from physinfer.roles import Optimizer, Target, Trial
-from physinfer.rundir import (  # noqa: F401 - the run files' names re-exported
-    NOISE_PRIOR_FILE,
-    RESUME_KEYS,
-    SELECTION_FILE,
-    RunDirectory,
-    TrialRecord,
-    embedding_fingerprint,
-)
+from physinfer.rundir import RESUME_KEYS, TrialRecord, embedding_fingerprint
 from physinfer.threads import refinement_torch_threads, torch_threads
+
+if TYPE_CHECKING:
+    from physinfer.evaluation import ClipEmbedder, Pipeline
+    from physinfer.refinement import RefineConfig
+    from physinfer.rundir import RunDirectory
+
+#: The evaluation, re-simulation and run-file names that moved out of the loop, still found
+#: here with a warning (:data:`physinfer.moved.MOVED`).
+__getattr__ = moved_names(__name__)
 
 
 def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:

@@ -7,9 +7,9 @@ run's identity, runs the loop (:mod:`physinfer.loop`) with a progress bar, and w
 outputs (result files, figures, videos, the report).
 
 :mod:`physinfer.api` calls :func:`run`; :func:`refine` takes the specs' fields as keywords.
-The pipeline builders, :func:`load_target` and :func:`default_budget` are re-exported here
-for code written before they moved to :mod:`physinfer.pipeline`, :mod:`physinfer.target` and
-:mod:`physinfer.specs`.
+The pipeline builders, ``load_target`` and ``default_budget`` moved to :mod:`physinfer.pipeline`,
+:mod:`physinfer.target` and :mod:`physinfer.specs`; code written before finds them here with a
+warning (:data:`physinfer.moved.MOVED`).
 """
 
 from __future__ import annotations
@@ -30,16 +30,8 @@ from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
 from physinfer.loop import run_refinement
-from physinfer.pipeline import (  # noqa: F401 - re-exported: the session's historical API
-    EffectParameterError,
-    build_pipeline,
-    effect_parameters,
-    fixed_by_user,
-    full_parameter_space,
-    make_simulator,
-    naming_effects,
-    target_duration,
-)
+from physinfer.moved import moved_names
+from physinfer.pipeline import fixed_by_user, full_parameter_space, target_duration
 from physinfer.plotting import plot_refinement  # imports matplotlib when it draws
 from physinfer.posterior.refined import posterior_start, report_posterior
 from physinfer.refinement import RefineResult
@@ -55,16 +47,12 @@ from physinfer.rundir import (
     path_sha256,
 )
 from physinfer.scene import scene_of
-from physinfer.specs import (  # default_budget re-exported: the session's historical API
-    ModelSpec,
-    RefineRequest,
-    SearchSpec,
-    default_budget,  # noqa: F401
-)
-from physinfer.target import load_target  # noqa: F401 - re-exported: the session's historical API
+from physinfer.specs import ModelSpec, RefineRequest, SearchSpec
 from physinfer.threads import with_refinement_threads
 from physinfer.trial_workers import trial_workers
 from physinfer.video import side_by_side, write_video
+
+__getattr__ = moved_names(__name__)
 
 #: ``progress``: ``True`` for a rich bar on stderr, ``False`` for none, or a callable
 #: ``(done, total, best_distance)``.

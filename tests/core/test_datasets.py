@@ -441,8 +441,8 @@ def _sims(units) -> list:
 
 
 def test_one_seed_per_theta_keeps_the_plan_and_the_stored_identity():
-    from physinfer.datasets.engine import dataset_config
     from physinfer.datasets.plan import SIM_STREAM, THETA_STREAM, seed_sequence
+    from physinfer.datasets.resume import dataset_config
 
     gen = PhenomenonDatasetGenerator(phenomenon=make_wave())
     assert TINY.seeds_per_theta == 1

@@ -97,7 +97,7 @@ def test_self_consistency_gap_summaries():
 
 
 def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
-    from physinfer.discrepancy.workflow import calibration_seeds
+    from physinfer.discrepancy.stages import calibration_seeds
     from physinfer.noise import noise_seeds
 
     for seed in (0, 3, 41):
@@ -111,7 +111,7 @@ def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
 
 
 def test_calibration_runs_must_be_positive(tmp_path: Path):
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
     with pytest.raises(UserInputError, match="--calibration-runs must be at least 1"):
         DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, calibration_runs=0).validate()
@@ -302,8 +302,8 @@ def test_refine_model_takes_the_scene_the_model_was_fitted_on(tmp_path: Path):
 
 
 def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
+    from physinfer.pipeline import build_pipeline
     from physinfer.plugins import load_registry
-    from physinfer.session import build_pipeline
     from physinfer.video import write_video
 
     registry, _ = load_registry()
@@ -317,7 +317,8 @@ def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
 
 
 def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()
@@ -519,7 +520,7 @@ def _pendulum_under_another_name():
 def test_workers_find_the_effects_of_a_phenomenon_registered_under_another_name(tmp_path: Path):
     """bench_diagnose's flag_lite is the flag under another name: its effects are the flag's."""
     from physinfer.discrepancy.parallel import usable_workers
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_alias", out=tmp_path, workers=2,
                                 registry_factory=_pendulum_under_another_name)  # fmt: skip
@@ -535,9 +536,9 @@ def test_a_calibration_target_is_encoded_once_and_read_back(tmp_path: Path, monk
     whose resume was refused. It is encoded once and read back after; another θ re-encodes."""
     import physinfer.video as video
     from physinfer.discrepancy.stages import calibration_target
+    from physinfer.pipeline import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.roles import Target
-    from physinfer.session import build_pipeline
 
     registry, _ = load_registry()
     pipeline = build_pipeline(registry, "pendulum_lab", embedder="")
@@ -560,7 +561,7 @@ def test_a_pool_starts_its_workers_with_their_model_before_the_first_round(tmp_p
     """The workers start while the baseline runs: each builds its model and an optimizer (a
     failure would only show in the first round's timing, so it is checked here)."""
     from physinfer.discrepancy.parallel import WorkerPool
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path, workers=2, optimizer="ax")
     with WorkerPool(settings, ["quadratic_drag"], 3, print) as pool:
@@ -578,8 +579,8 @@ def test_the_baselines_resimulations_on_workers_are_this_process_own(tmp_path: P
     there is none."""
     from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
     from physinfer.discrepancy.parallel import WorkerPool
+    from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.discrepancy.stages import build_base
-    from physinfer.discrepancy.workflow import DiagnoseSettings
     from physinfer.evaluation import simulate_and_embed
     from physinfer.plugins import load_registry
 

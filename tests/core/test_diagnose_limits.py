@@ -14,18 +14,17 @@ import numpy as np
 import pytest
 
 from physinfer.discrepancy.decide import DecisionRule
-from physinfer.discrepancy.limits import (
-    LimitConfig,
+from physinfer.discrepancy.ladder import (
     LimitInputs,
     Probe,
-    detection_limits,
-    interpolate_limit,
-    limit_line,
     pairwise_median,
-    required_gap,
     strength_path,
     values_at,
 )
+from physinfer.discrepancy.limit_rule import interpolate_limit, required_gap
+from physinfer.discrepancy.limit_text import limit_line
+from physinfer.discrepancy.limits import detection_limits
+from physinfer.discrepancy.settings import LimitConfig
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.roles import Effect
 
@@ -192,7 +191,7 @@ def _limits(
     """Detection limits at THETA with ``K = 4`` base re-simulations; the null scale their floor.
 
     ``pooled_for``: ``inputs -> pooled`` (probes whose clips run elsewhere)."""
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import Pipeline
 
     phenomenon, renderer = pendulum
     base = Pipeline(phenomenon, base_sim, renderer, embedder, [])
@@ -442,7 +441,7 @@ def test_the_lower_scale_reading_reuses_the_refits_it_shares_with_the_first(pend
     import physinfer.discrepancy.limits as limits_module
     from physinfer.discrepancy.limit_rule import RefitLog
     from physinfer.embedders import GridSpectrumEmbedder
-    from physinfer.loop import Pipeline
+    from physinfer.evaluation import Pipeline
 
     phenomenon, renderer = pendulum
     embedder = GridSpectrumEmbedder(n_frames=20)

@@ -137,7 +137,8 @@ def drag_target(tmp_path_factory) -> Path:
 
 
 def _diagnose(out: Path, target: Path, ridge: bool, **kw) -> dict:
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
 
     settings = DiagnoseSettings(
         plugin="bouncing_ball", out=out, target_path=target, seed=1, workers=1, videos=False, ridge_starts=ridge,
@@ -150,8 +151,8 @@ def test_the_ridge_probe_finds_the_drag_behind_the_restitution(tmp_path: Path, d
     """At the baseline's fit (restitution about 0.5, drag off) the probe switches the drag on
     and refits the base to the video: its closest point is near the truth, far closer than θ̂."""
     from physinfer.discrepancy.ridge import ridge_starts
-    from physinfer.discrepancy.workflow import DiagnoseSettings
-    from physinfer.session import build_pipeline
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.pipeline import build_pipeline
     from physinfer.video import read_video
 
     registry = ball_registry()

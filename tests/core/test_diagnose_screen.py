@@ -116,7 +116,8 @@ def target(tmp_path_factory) -> Path:
 
 
 def _diagnose(out: Path, target: Path, screen: bool, **kw) -> dict:
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
 
     kw = {"limits": False, "workers": 1, **kw}
     settings = DiagnoseSettings(
@@ -177,7 +178,7 @@ def test_the_screen_and_limits_on_workers_are_those_of_one_process(tmp_path: Pat
 def test_a_deterministic_phenomenon_is_never_screened(tmp_path: Path):
     """Noise floor 0: any shift clears a zero threshold, so nothing is simulated or left out."""
     from physinfer.discrepancy.screen import screen_effects
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_lab", out=tmp_path)
     identical = np.zeros((4, 8))

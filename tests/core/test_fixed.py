@@ -11,9 +11,10 @@ import pytest
 from physinfer.errors import UserInputError
 from physinfer.fixed import FixedParameters, resolve_fixed
 from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.rundir import RunDirectory
-from physinfer.session import build_pipeline, refine
+from physinfer.session import refine
 
 BIN = Path(sys.executable).parent / "physinfer"
 SPACE = ParameterSpace(

@@ -60,6 +60,8 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.locking": "",
         "physinfer.outputs": "the --out manifest every command claims its folder with, beside locking",
         "physinfer.console": "the stderr console; no physinfer import",
+        "physinfer.moved": "old path -> new path of names that moved, for the old modules' "
+        "__getattr__; no physinfer import",
         "physinfer.progress": "progress bars on that console, handed in by the callers above",
         "physinfer.devices": "a torch device checked before any work",
         "physinfer.registry": "the record plugins fill (scene and roles read it); the machinery "

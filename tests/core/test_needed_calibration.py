@@ -71,7 +71,7 @@ def test_a_deterministic_phenomenon_sends_every_first_stage_with_the_control_and
     """A noise floor of 0 leaves the null scale anywhere from 0 up: every run's first stage is
     needed, and goes with the first round; otherwise only where a worker would idle."""
     from physinfer.discrepancy.calibration_stage import first_calibration_jobs
-    from physinfer.discrepancy.workflow import DiagnoseSettings
+    from physinfer.discrepancy.settings import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibration_runs=3)
     assert first_calibration_jobs(settings, ["drag"], 2, floor=0.0) == [(0, False), (1, False), (2, False)]
@@ -190,7 +190,8 @@ def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_th
     and the decisions are those of refining every run."""
     from tests.core.test_diagnose import _diagnose, _pendulum_target
 
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
     from physinfer.plugins import load_registry
 
     target = _pendulum_target(tmp_path, "quadratic_drag")

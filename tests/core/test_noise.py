@@ -6,11 +6,14 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
-from physinfer.loop import SELECTION_FILE, Pipeline, RefineConfig, run_refinement, select_best
+from physinfer.evaluation import Pipeline
+from physinfer.loop import run_refinement
 from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.refinement import RefineConfig
+from physinfer.resimulation import select_best
 from physinfer.roles import Embedder, Renderer, Simulator, Target
-from physinfer.rundir import RunDirectory, TrialRecord
+from physinfer.rundir import SELECTION_FILE, RunDirectory, TrialRecord
 from physinfer.types import Clip, Trajectory
 
 SPACE = ParameterSpace([ParameterSpec("a", (0.0, 2.0))])

@@ -497,7 +497,8 @@ def test_a_search_from_a_posterior_takes_the_phenomenons_shorter_default_budget(
     import dataclasses
 
     from physinfer.plugins import load_registry
-    from physinfer.session import default_budget, refine
+    from physinfer.session import refine
+    from physinfer.specs import default_budget
 
     path, _ = pendulum_estimator
     registry, _ = load_registry()
@@ -584,7 +585,7 @@ def test_no_refined_posterior_without_a_noise_scale_or_enough_trials():
 
 def test_refine_prints_digits_only_for_what_the_video_determines():
     from physinfer.cli.app import refine_result_lines
-    from physinfer.loop import RefineResult
+    from physinfer.refinement import RefineResult
 
     def marginal(label: str) -> dict:
         return {

@@ -269,7 +269,8 @@ def test_open_hands_the_page_to_the_browser(refine_run, tmp_path):
 
 @pytest.mark.slow
 def test_a_diagnosis_gets_a_page_with_its_verdict_maps_and_video(tmp_path):
-    from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.workflow import run_diagnosis
     from physinfer.plugins import load_registry
 
     registry, _ = load_registry()

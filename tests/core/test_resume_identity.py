@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.rundir import RunDirectory, embedding_fingerprint, resume_differences
-from physinfer.session import build_pipeline, refine
+from physinfer.session import refine
 from physinfer.types import Clip
 from physinfer.video import write_video
 

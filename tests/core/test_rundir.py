@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from physinfer.discrepancy.workflow import DiagnoseSettings, run_diagnosis
+from physinfer.discrepancy.settings import DiagnoseSettings
+from physinfer.discrepancy.workflow import run_diagnosis
 from physinfer.errors import UserInputError
 from physinfer.locking import LOCK_FILE, DirectoryLock
 from physinfer.outputs import MANIFEST_FILE

@@ -109,7 +109,7 @@ def test_a_bound_phenomenon_builds_the_scene_and_workers_rebuild_it(registry):
 
 def test_a_dataset_records_its_scene_and_estimators_refuse_another(registry):
     from physinfer.datasets import generator_for
-    from physinfer.datasets.engine import dataset_config
+    from physinfer.datasets.resume import dataset_config
     from physinfer.posterior.workflow import load_estimator
 
     flag = registry.phenomenon("flag")

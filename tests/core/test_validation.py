@@ -16,9 +16,10 @@ from physinfer.cli.app import app, parse_render_set
 from physinfer.errors import UserInputError
 from physinfer.fixed import resolve_fixed
 from physinfer.parameters import parse_assignments
+from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.roles import Renderer
-from physinfer.session import build_pipeline, refine
+from physinfer.session import refine
 
 BIN = Path(sys.executable).parent / "physinfer"
 QUICK = {"plugin": "pendulum_lab", "steps": 2, "optimizer": "random", "progress": False, "noise_samples": 0,

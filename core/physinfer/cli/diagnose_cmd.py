@@ -251,7 +251,7 @@ def _candidate_lines(report: dict) -> list[str]:
     with ``--limits`` a line per effect with its detection limit and the null scale's note."""
     # Imported here: the detection limits load most of the diagnosis (~45 % more start-up
     # for --help, which imports every command module).
-    from physinfer.discrepancy.limits import limit_line
+    from physinfer.discrepancy.limit_text import limit_line
 
     lines = []
     for c in report["candidates"]:

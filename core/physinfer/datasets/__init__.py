@@ -8,13 +8,11 @@ manifest, and resumes interrupted runs; :class:`ClipDataset` reads a split back,
 memory-mapped. The format is described in ``docs/datasets.md``.
 """
 
-from physinfer.datasets.engine import (
+from physinfer.datasets.engine import GenerateResult, generate_dataset
+from physinfer.datasets.executors import (
     ExecutorInfo,
-    GenerateProgress,
-    GenerateResult,
     InlineExecutor,
     default_workers,
-    generate_dataset,
     open_executor,
 )
 from physinfer.datasets.generator import DatasetGenerator, PhenomenonDatasetGenerator, generator_for
@@ -30,6 +28,7 @@ from physinfer.datasets.presets import (
     SplitCounts,
     parse_split_counts,
 )
+from physinfer.datasets.resume import GenerateProgress
 
 __all__ = [
     "CPU_PRESET",

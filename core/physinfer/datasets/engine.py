@@ -4,9 +4,9 @@ One code path serves every executor: a :class:`concurrent.futures.Executor` (see
 :mod:`physinfer.datasets.executors`) runs :func:`~physinfer.datasets.worker.run_unit` per
 unit, in a bounded window, and this process writes each unit's record as it completes.
 Re-running on the same directory resumes (:mod:`physinfer.datasets.resume`): units whose
-record and files are intact are skipped, damaged ones are generated again. The executor
-and resume names (:class:`GenerateProgress` included, defined with the resume that
-reports its first phase) are re-exported here.
+record and files are intact are skipped, damaged ones are generated again.
+:class:`~physinfer.datasets.resume.GenerateProgress` is defined with the resume that reports
+its first phase.
 """
 
 from __future__ import annotations
@@ -17,19 +17,13 @@ from collections.abc import Mapping
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from physinfer.datasets.executors import (
-    ExecutorInfo,
-    InlineExecutor,
-    default_workers,
-    open_executor,
-)
+from physinfer.datasets.executors import ExecutorInfo, InlineExecutor, open_executor
 from physinfer.datasets.generator import DatasetGenerator
 from physinfer.datasets.plan import UnitPlan, plan_dataset
 from physinfer.datasets.presets import SPLITS, DatasetPreset
 from physinfer.datasets.resume import (
-    GenerateProgress,
     check_directory,
     dataset_config,
     finish_dataset,
@@ -46,11 +40,16 @@ from physinfer.datasets.worker import UnitJob, run_unit
 from physinfer.errors import PhysinferError
 from physinfer.io import to_jsonable
 from physinfer.locking import exclusive_directory
+from physinfer.moved import moved_names
 
-__all__ = [
-    "ExecutorInfo", "GenerateProgress", "GenerateResult", "InlineExecutor", "dataset_config", "default_workers",
-    "generate_dataset", "open_executor",
-]
+if TYPE_CHECKING:
+    from physinfer.datasets.resume import GenerateProgress
+
+__all__ = ["GenerateResult", "generate_dataset"]
+
+#: The progress record and the executors' default, which moved out of this module, still found
+#: here with a warning (:data:`physinfer.moved.MOVED`).
+__getattr__ = moved_names(__name__)
 
 
 @dataclass

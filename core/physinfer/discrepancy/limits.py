@@ -43,50 +43,29 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from physinfer.discrepancy.clip_jobs import concurrently
-from physinfer.discrepancy.ladder import (
-    Ladder,
-    LimitInputs,
-    Probe,
-    ProbeFactory,
-    ladder_seeds,
-    pairwise_median,
-    run_ladder,
-    strength_path,
-    values_at,
-)
-from physinfer.discrepancy.limit_rule import (
-    RefitLog,
-    Threshold,
-    effect_limit,
-    interpolate_limit,
-    required_gap,
-)
-from physinfer.discrepancy.limit_text import limit_line, reveal_phrase, summary_phrase
+from physinfer.discrepancy.ladder import Ladder, Probe, ladder_seeds, pairwise_median, run_ladder
+from physinfer.discrepancy.limit_rule import RefitLog, Threshold, effect_limit
+from physinfer.discrepancy.limit_text import summary_phrase
 from physinfer.discrepancy.refit import jacobian
 from physinfer.discrepancy.reveal import reveal_by_fixing, reveal_by_setting
-from physinfer.discrepancy.settings import LimitConfig
 from physinfer.evaluation import Pipeline
+from physinfer.moved import moved_names
 from physinfer.parameters import ParameterSpace
 
-__all__ = [
-    "LimitConfig",
-    "LimitInputs",
-    "Probe",
-    "detection_limits",
-    "interpolate_limit",
-    "limit_line",
-    "pairwise_median",
-    "required_gap",
-    "reveal_phrase",
-    "strength_path",
-    "summary_phrase",
-    "values_at",
-]
+if TYPE_CHECKING:
+    from physinfer.discrepancy.ladder import LimitInputs, ProbeFactory
+    from physinfer.discrepancy.settings import LimitConfig
+
+__all__ = ["detection_limits"]
+
+#: The ladder's, the rule's and the printed line's names, which moved out of this module, still
+#: found here with a warning (:data:`physinfer.moved.MOVED`).
+__getattr__ = moved_names(__name__)
 
 Log = Callable[[str], None]
 

@@ -39,7 +39,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -59,14 +59,11 @@ from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_reg
 from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.screen import refined_already, screen_effects
-from physinfer.discrepancy.settings import DiagnoseSettings
-from physinfer.discrepancy.stages import (  # noqa: F401 - calibration_seeds and Stage re-exported
+from physinfer.discrepancy.stages import (
     GapContext,
-    Stage,
     ablated_stage,
     adopt_single_calibration,
     build_base,
-    calibration_seeds,
     control_stage,
     effect_stage,
     run_stage,
@@ -76,6 +73,7 @@ from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
+from physinfer.moved import moved_names
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.outputs import OutputFolder
 from physinfer.pipeline import target_duration
@@ -86,6 +84,14 @@ from physinfer.report import write_report_quietly
 from physinfer.roles import Target
 from physinfer.scene import scene_of
 from physinfer.target import load_target
+
+if TYPE_CHECKING:
+    from physinfer.discrepancy.settings import DiagnoseSettings
+    from physinfer.discrepancy.stages import Stage
+
+#: The settings and the stage record, defined below the stages that use them, still found here
+#: with a warning (:data:`physinfer.moved.MOVED`).
+__getattr__ = moved_names(__name__)
 
 Log = Callable[[str], None]
 

@@ -9,7 +9,8 @@ headless through EGL (Mesa's llvmpipe on CPU machines) and deterministic for fix
 This module holds the renderer; ζ (:class:`FlagRenderParams` and its checks) is
 :mod:`physinfer_flag.render_params`, the flag's scene (size and pole measured from the trajectory, pole mesh,
 framing) is :mod:`physinfer_flag.flag_scene`, the helpers any cloth renderer shares
-:mod:`physinfer_flag.sheet_render`; their public names are re-exported here.
+:mod:`physinfer_flag.sheet_render`; the names that moved there are still found here with a
+warning (:data:`MOVED`).
 
 Coordinates follow the cloth simulator's contract: metres, z up, wind along +x, the pole
 vertical along z at x = y = 0 with the flag's hoist on it. ``Trajectory.extras`` may hold
@@ -30,48 +31,48 @@ import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.moved import moved_names
 from physinfer.rendering import OffscreenContext
 from physinfer.roles import Renderer
 from physinfer.types import Clip, Trajectory
 from physinfer_flag.backgrounds import BACKGROUND_NAMES, background_image, list_background_images
-from physinfer_flag.flag_scene import (
-    FlagGeometry,
-    flag_camera,
-    measure_flag,
-    pole_mesh,
-    waving_sheet,
-)
+from physinfer_flag.flag_scene import flag_camera, measure_flag, pole_mesh
 from physinfer_flag.render_params import MAX_WIND_CAMERA_ANGLE_DEG, FlagRenderParams
 from physinfer_flag.sheet_render import (
     MESH_SHADERS,
     DoubleSidedSheet,
-    SheetView,
-    SheetViewParams,
     add_camera_and_sun,
     check_renderable,
-    check_view,
-    composite_over,
     context_of_size,
     fabric_material,
-    fitting_distance,
-    frame_size,
-    orbit_camera,
     render_sheet,
     sheet_scene,
-    texture_coordinates,
 )
 from physinfer_flag.textures import FLAG_NAMES, flag_texture
 
-__all__ = [
-    "MAX_WIND_CAMERA_ANGLE_DEG", "MESH_SHADERS", "TEXTURE_HEIGHT", "DoubleSidedSheet", "FlagGeometry",
-    "FlagRenderParams", "FlagRenderer", "SheetView", "SheetViewParams", "add_camera_and_sun", "check_renderable",
-    "check_view", "composite_over", "context_of_size", "fabric_material", "fitting_distance", "frame_size",
-    "measure_flag", "orbit_camera", "render_sheet", "sheet_scene", "texture_coordinates", "waving_sheet",
-]
+if TYPE_CHECKING:
+    from physinfer_flag.flag_scene import FlagGeometry
+
+__all__ = ["TEXTURE_HEIGHT", "FlagRenderer"]
+
+
+def _moved(new: str, names: str) -> dict[str, str]:
+    return {f"{__name__}.{name}": f"{new}.{name}" for name in names.split()}
+
+
+#: Old path → new path of the names that moved out of this module (the flag's scene and the
+#: helpers every cloth renderer shares); :func:`physinfer.moved.moved_names` finds them.
+MOVED = MappingProxyType({
+    **_moved("physinfer_flag.flag_scene", "FlagGeometry waving_sheet"),
+    **_moved("physinfer_flag.sheet_render",
+             "SheetView SheetViewParams check_view composite_over fitting_distance frame_size "
+             "orbit_camera texture_coordinates"),
+})  # fmt: skip
+__getattr__ = moved_names(__name__, MOVED)
 
 TEXTURE_HEIGHT = 256
 """Texture resolution (rows); 256×384 is sharper than a 224-pixel render needs."""

@@ -26,7 +26,7 @@ from physinfer.rendering import OffscreenContext
 from physinfer.roles import Renderer
 from physinfer.settings import check_range
 from physinfer.types import Clip, Trajectory
-from physinfer_flag.render import (
+from physinfer_flag.sheet_render import (
     DoubleSidedSheet,
     SheetViewParams,
     add_camera_and_sun,

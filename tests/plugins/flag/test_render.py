@@ -1,6 +1,6 @@
 """Tests of the flag renderer on headless pyrender (EGL; Mesa's llvmpipe on CPU machines).
 
-Trajectories come from :func:`physinfer_flag.render.waving_sheet`, a synthetic 2:3 sheet
+Trajectories come from :func:`physinfer_flag.flag_scene.waving_sheet`, a synthetic 2:3 sheet
 with a travelling wave that follows the cloth simulator's contract, so these tests do not
 depend on the simulator.
 """
@@ -18,14 +18,10 @@ from physinfer.errors import UserInputError
 from physinfer.testing import check_renderer
 from physinfer.types import Trajectory
 from physinfer_flag.backgrounds import BACKGROUND_NAMES
-from physinfer_flag.render import (
-    DoubleSidedSheet,
-    FlagRenderer,
-    FlagRenderParams,
-    composite_over,
-    measure_flag,
-    waving_sheet,
-)
+from physinfer_flag.flag_scene import measure_flag, waving_sheet
+from physinfer_flag.render import FlagRenderer
+from physinfer_flag.render_params import FlagRenderParams
+from physinfer_flag.sheet_render import DoubleSidedSheet, composite_over
 from physinfer_flag.textures import FLAG_NAMES
 
 SMALL = {"image_size": 64}

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from physinfer.types import Trajectory
+from physinfer_flag.flag_scene import measure_flag
 from physinfer_flag.phenomenon import DEFAULT_TRUTH_BASE, make_renderer, make_simulator
-from physinfer_flag.render import measure_flag
 
 DEFAULT = {"flag_length": 1.5, "flag_height": 1.0, "pinning": "hoist", "pole_height": 3.0}
 #: Short clips: the warm-up (2 s) and 10 recorded frames.

@@ -1,0 +1,83 @@
+"""Names that moved to another module, found at their old path with a warning.
+
+Code written before a name moved keeps working: the old module's ``__getattr__`` (PEP 562,
+called only for a name the module does not hold) looks the old path up in :data:`MOVED`,
+warns with a :class:`DeprecationWarning` that names the new path, and returns the object
+itself, so ``isinstance``, ``is`` and pickles see one class. Python's default filters show
+the warning once per place that uses the old path (and hide it outside ``__main__`` and test
+runs). A plugin keeps its own map and passes it to :func:`moved_names`.
+
+Inside physinfer every name is imported from the module that defines it
+(``tests/core/test_moved_names.py`` holds that and checks every entry here).
+"""
+
+from __future__ import annotations
+
+import importlib
+import warnings
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
+from typing import Any
+
+
+def _entries(old: str, new: str, names: str) -> dict[str, str]:
+    return {f"{old}.{name}": f"{new}.{name}" for name in names.split()}
+
+
+#: Old path → new path of every name that moved out of a module still imported by its old
+#: path (issue 47: records and helpers moved below the code that uses them).
+MOVED: Mapping[str, str] = MappingProxyType({
+    **_entries("physinfer.loop", "physinfer.evaluation",
+               "NON_FINITE NON_FINITE_DISTANCE ClipEmbedder Pipeline evaluate evaluate_mean make_clips "
+               "simulate_and_embed simulate_many simulate_one squared_distance"),
+    **_entries("physinfer.loop", "physinfer.resimulation", "SELECTION_SEED_SALT"),
+    **_entries("physinfer.loop", "physinfer.rundir", "NOISE_PRIOR_FILE SELECTION_FILE RunDirectory"),
+    **_entries("physinfer.loop", "physinfer.refinement", "RefineConfig"),
+    **_entries("physinfer.session", "physinfer.pipeline",
+               "EffectParameterError build_pipeline effect_parameters make_simulator naming_effects"),
+    **_entries("physinfer.session", "physinfer.specs", "default_budget"),
+    **_entries("physinfer.session", "physinfer.target", "load_target"),
+    **_entries("physinfer.discrepancy.workflow", "physinfer.discrepancy.settings", "DiagnoseSettings"),
+    **_entries("physinfer.discrepancy.workflow", "physinfer.discrepancy.stages", "Stage calibration_seeds"),
+    **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.settings", "LimitConfig"),
+    **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.ladder",
+               "LimitInputs ProbeFactory strength_path values_at"),
+    **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.limit_rule",
+               "interpolate_limit required_gap"),
+    **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.limit_text", "limit_line reveal_phrase"),
+    **_entries("physinfer.datasets.engine", "physinfer.datasets.resume", "GenerateProgress"),
+    **_entries("physinfer.datasets.engine", "physinfer.datasets.executors", "default_workers"),
+})  # fmt: skip
+
+
+def moved_names(module: str, moved: Mapping[str, str] = MOVED) -> Callable[[str], Any]:
+    """The ``__getattr__`` of the old module ``module``: ``__getattr__ = moved_names(__name__)``.
+
+    Args:
+        module: The old module's dotted name.
+        moved: Old path → new path (``"package.old.Name"`` → ``"package.new.Name"``).
+
+    Returns:
+        A function that returns a moved name's object (warning once per place that asks) and
+        raises :class:`AttributeError` for any other name, as a module without it would.
+    """
+    prefix = f"{module}."
+
+    def __getattr__(name: str) -> Any:
+        new = moved.get(prefix + name)
+        if new is None:
+            raise AttributeError(f"module {module!r} has no attribute {name!r}")
+        warnings.warn(
+            f"{prefix}{name} moved to {new}: import it from {new.rpartition('.')[0]}",
+            DeprecationWarning,
+            stacklevel=2,  # the line that imports or reads the old path
+        )
+        return resolve(new)
+
+    return __getattr__
+
+
+def resolve(path: str) -> Any:
+    """The object at a dotted ``path`` (``"package.module.Name"``), importing its module."""
+    module, _, name = path.rpartition(".")
+    return getattr(importlib.import_module(module), name)
