@@ -19,8 +19,8 @@ from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.parameters import ParameterSpace
 from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator
-from physinfer.posterior.inputs import MAX_OUTSIDE_SHARE
 from physinfer.posterior.figures import corner_figure, corner_plot
+from physinfer.posterior.inputs import MAX_OUTSIDE_SHARE
 from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
 from physinfer.posterior.summary import correlations, format_marginal, marginals
 from physinfer.registry import Registry
