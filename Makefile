@@ -24,7 +24,7 @@ export PYOPENGL_PLATFORM ?= egl
 # pyglet (imported by pyrender) looks for an X display unless told it is headless.
 export PYGLET_HEADLESS ?= 1
 
-.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes posterior-camera posterior-pendulum posterior-hanging-cloth clean
+.PHONY: install system-deps demo test test-all lint docs bench pretrained posterior posterior-sizes posterior-camera posterior-corners posterior-pendulum posterior-hanging-cloth clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -135,6 +135,20 @@ posterior-sizes: install
 	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior-sizes --device cpu \
 		--posterior plugins/flag/physinfer_flag/data/posterior_sizes.safetensors \
 		--out runs/flag-posterior-sizes-calibration
+
+# The flag's shipped estimator for a flag pinned at its two top corners (a banner between two
+# points): 480 + 120 simulations of sizes drawn as for `posterior-sizes` (about 35 min on 2
+# cores), the same embedder and flows, the size as an input; then its calibration.
+posterior-corners: install
+	$(BIN)/physinfer dataset generate --plugin flag --preset cpu --sims 480,0,120 --renders-per-sim 1 \
+		--frames 60 --size 224 --gray --seed 23 --scene-set pinning=corners \
+		--scene-range flag_length=0.9:3 --scene-range flag_height=0.6:2 --out runs/flag-posterior-corners
+	$(BIN)/physinfer posterior train --plugin flag --data runs/flag-posterior-corners --device cpu --seed 0 \
+		--embedder spectral --embedder-frames 60 --density maf --patience 20 --ensemble 5 \
+		--out plugins/flag/physinfer_flag/data/posterior_corners.safetensors --overwrite
+	$(BIN)/physinfer evaluate calibration --plugin flag --data runs/flag-posterior-corners --device cpu \
+		--posterior plugins/flag/physinfer_flag/data/posterior_corners.safetensors \
+		--out runs/flag-posterior-corners-calibration
 
 # The pendulum's shipped estimator: 1,200 training and 300 held-out 8-s simulations with every
 # look randomised (64 px RGB; about 10 min on 2 cores), sent through camera effects, H.264 and

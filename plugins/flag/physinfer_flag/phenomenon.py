@@ -27,6 +27,9 @@ SIZES_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_sizes.sa
 #: The shipped estimator told the camera and light (``make posterior-camera``): chosen by
 #: ``infer --render-set`` giving them all, sharper than the default, which averages over them.
 CAMERA_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_camera.safetensors"
+#: The shipped estimator for a flag pinned at its two top corners (``make posterior-corners``):
+#: trained across the same sizes as the sizes estimator, which it takes as input too.
+CORNERS_POSTERIOR = Path(__file__).resolve().parent / "data" / "posterior_corners.safetensors"
 
 #: Ground truth of the embedded target: wind and area weight off-centre, bending at 1×.
 DEFAULT_TRUTH_BASE = {"wind_speed": 6.5, "area_weight": 0.12}
@@ -161,7 +164,7 @@ def make_phenomenon() -> Phenomenon:
         default_steps=40,
         default_steps_with_posterior=16,  # 20 held-out targets: 16 trials beat 40 (docs/benchmarks.md)
         default_posterior=str(DEFAULT_POSTERIOR),
-        scene_posteriors=(str(SIZES_POSTERIOR), str(CAMERA_POSTERIOR)),
+        scene_posteriors=(str(SIZES_POSTERIOR), str(CAMERA_POSTERIOR), str(CORNERS_POSTERIOR)),
         framing=framing,
         scene_settings=SCENE_SETTINGS,
     )
