@@ -581,6 +581,11 @@ def test_no_refined_posterior_without_a_noise_scale_or_enough_trials():
     for words, (xs, ds, fl) in cases.items():
         post, why = refine_posterior(samples, m, space, xs, ds, fl, box)
         assert post is None and words in why, (words, why)
+    # A model that does not reproduce the video (its best fit 10x further from the target than
+    # from itself): no likelihood at the floor's scale; at or below the limit, as before.
+    post, why = refine_posterior(samples, m, space, x, d, floor, box, noise_ratio=10.5)
+    assert post is None and "noise ratio 10.5" in why and "diagnose" in why
+    assert refine_posterior(samples, m, space, x, d, floor, box, noise_ratio=1.2)[0] is not None
 
 
 def test_refine_prints_digits_only_for_what_the_video_determines():

@@ -52,6 +52,14 @@ MIN_ESS = 200
 #: its width on each side (room for an amortized posterior that is slightly off).
 BOX_PAD = 0.5
 METHODS = ("product", "box")
+#: Above this noise ratio (re-simulations of the best fit lie this many times further from the
+#: target than from each other) no θ reproduces the video within the noise floor, the premise of
+#: the likelihood ``P(d ≤ ε)``: it is then a tail probability that the GP's uncertainty, not the
+#: trials, decides, and no refined posterior is made. Measured (2026-11-26): 20 refinements of
+#: flag targets the model can make, 16 trials each, had ratios 0.42-5.2; a corner-pinned flag of
+#: another simulator had 10.5, and its "refined" 90 % wind interval [8.98, 9.90] held neither its
+#: best fit (7.93) nor the truth (6.2) while the amortized one [4.01, 9.54] held both.
+MISFIT_RATIO = 6.0
 
 
 @dataclass
@@ -144,6 +152,7 @@ def refine_posterior(
     method: str = "product",
     n_samples: int = 5000,
     seed: int = 0,
+    noise_ratio: float | None = None,
 ) -> tuple[RefinedPosterior | None, str | None]:
     """The posterior ``∝ prior × L(θ)`` from a refinement's trials (see the module docstring).
 
@@ -156,6 +165,9 @@ def refine_posterior(
         floor_pairwise: Distances between re-simulations of one θ (the noise floor).
         box: The search box ``(lo, hi)``, normalised.
         method: ``"product"`` or ``"box"``.
+        noise_ratio: The best fit's re-simulations' distance to the target over their
+            distance to each other (``None``: not measured); above :data:`MISFIT_RATIO`, no
+            refined posterior.
 
     Returns:
         ``(posterior, None)`` or ``(None, reason)``.
@@ -180,6 +192,12 @@ def refine_posterior(
         return (
             None,
             f"{len(trials_d)} successful trials; a refined posterior needs at least {MIN_TRIALS}",
+        )
+    if noise_ratio is not None and noise_ratio > MISFIT_RATIO:
+        return None, (
+            f"no fit reproduces the video within the noise floor (noise ratio {noise_ratio:.1f} > "
+            f"{MISFIT_RATIO:g}): the model misses something the video shows, so the trials' distances "
+            "carry no likelihood at the floor's scale (`physinfer diagnose` looks for what it misses)"
         )
     log_eps = float(np.log(np.quantile(floor, 0.95)))
     gp = likelihood_model(np.asarray(trials_x)[:, dims], np.asarray(trials_d, dtype=float), seed)
@@ -281,7 +299,7 @@ def report_posterior(
     box = start.box if start is not None else (-np.ones(len(space.names)), np.ones(len(space.names)))
     refined, note = refine_posterior(
         amortized.samples_unit, amortized.marginals, space, trials_x, trials_d, floor, box,
-        method=method, seed=seed,
+        method=method, seed=seed, noise_ratio=(result.extra.get("noise_floor") or {}).get("ratio"),
     )  # fmt: skip
     source: dict[str, Any] = {"kind": "amortized", "estimator": str(amortized.estimator)}
     chosen_marginals, chosen_corr = amortized.marginals, amortized.correlations
