@@ -11,10 +11,16 @@ condition per target (the flag only): the render composited over a photographic 
 real video from ``--photo``, else a procedural photo-like one), sensor noise of 3 grey levels
 and H.264 at CRF 35. ``--scene-range NAME=LO:HI`` draws that scene value per target,
 log-uniformly (seeded from ``900_000 + i``), and tells infer the drawn value (a flag's size).
+``--render-set-told`` tells infer the camera and light the targets were rendered with (the
+renderer's default ζ, its numeric settings, as ``infer --render-set``): an estimator told the
+camera (``posterior train --told-camera``) needs them, and the shipped one for them is chosen;
+``--told NAME=VALUE`` tells a value other than the targets' (a camera told wrongly).
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior_targets.py --targets 100 \\
         --posterior plugins/flag/physinfer_flag/data/posterior_default.safetensors --degraded --rows rows.jsonl
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior_targets.py --plugin hanging_cloth --targets 50
+    PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior_targets.py --targets 100 --render-set-told \\
+        --posterior plugins/flag/physinfer_flag/data/posterior_camera.safetensors --rows rows.jsonl
 
 Prints one JSON object: per condition and per drawn parameter the 90 % coverage, the median
 error of the posterior median and the median 90 % width (the flag's wind also under its old
@@ -113,9 +119,18 @@ def degraded(pipeline: Any, trajectory: Any, background: np.ndarray, rng: np.ran
     return sensor_noise(frames, rng, sigma=3.0)
 
 
+def told_camera(renderer: Any) -> dict[str, float]:
+    """The numeric render settings of the renderer's default ζ, which the targets are rendered
+    with: what a user who knows the camera passes as ``--render-set``."""
+    return {
+        k: float(v) for k, v in renderer.default_render_params.items()
+        if isinstance(v, (int, float)) and not isinstance(v, bool)
+    }  # fmt: skip
+
+
 def infer_row(
     registry: Any, plugin: str, path: Path, posterior: Path | None, theta: dict[str, float],
-    names: list[str], scene: dict[str, Any], out: Path,
+    names: list[str], scene: dict[str, Any], out: Path, render_set: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """``physinfer infer --target path`` (no predictive check): each drawn parameter's median,
     error, 90 % width and whether its 90 % interval covers the truth."""
@@ -126,6 +141,7 @@ def infer_row(
     report = infer(
         registry, plugin=plugin, out=out, target_path=path, posterior=posterior, n_samples=2000,
         conditioning=Conditioning(), check=False, scene_set=scene or None,
+        render_set=render_set or None,
     )  # fmt: skip
     params = {}
     for name in names:
@@ -138,6 +154,7 @@ def infer_row(
     return {
         "params": params,
         "extrapolating": bool((report.inputs or {}).get("extrapolating")),
+        "estimator": Path(report.estimator).name,
         "seconds_after_start_up": time.perf_counter() - t0 - report.seconds.get("start_up", 0.0),
         "seconds": time.perf_counter() - t0,
     }
@@ -186,6 +203,10 @@ def main() -> None:
                         help="estimator file (default: the shipped one); repeat to compare several on the same targets")
     parser.add_argument("--degraded", action="store_true",
                         help="also: photo background, noise, H.264 CRF 35 (the flag's renderer only)")
+    parser.add_argument("--render-set-told", action="store_true",
+                        help="tell infer the targets' camera and light (the renderer's default ζ), as --render-set")
+    parser.add_argument("--told", action="append", default=[], metavar="NAME=VALUE",
+                        help="with --render-set-told: tell this value instead of the targets' own (a wrong camera)")
     parser.add_argument("--photo", default=None, help="a video whose middle frame is the background")
     parser.add_argument("--rows", type=Path, default=None, help="append per-target rows (JSON lines)")
     parser.add_argument("--summarise", action="store_true", help="only summarise --rows")
@@ -197,6 +218,7 @@ def main() -> None:
         print(json.dumps({"summary": summarise(rows), "rows": len(rows)}, indent=1))
         return
 
+    from physinfer.parameters import parse_assignments
     from physinfer.pipeline import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.scene import parse_scene_set
@@ -205,6 +227,7 @@ def main() -> None:
     registry = load_registry()[0]
     scene = parse_scene_set(args.scene_set)
     ranges = parse_ranges(args.scene_range)
+    wrong = {name: float(value) for name, value in parse_assignments(args.told, "--told").items()}
     pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=scene or None)
     names = drawn_parameters(args.plugin, pipeline.simulator.parameter_space)
     rows: list[dict[str, Any]] = []
@@ -232,9 +255,13 @@ def main() -> None:
                 row: dict[str, Any] = {"target": i, "condition": label, "theta": {k: theta[k] for k in names}}
                 if ranges:
                     row["scene"] = {k: target_scene[k] for k in ranges}
+                told = {**told_camera(pipeline.renderer), **wrong} if args.render_set_told else None
+                if told:
+                    row["render_set"] = told
                 try:
                     row.update(infer_row(
-                        registry, args.plugin, path, posterior, theta, names, target_scene, folder / f"out-{i}-{len(rows)}"
+                        registry, args.plugin, path, posterior, theta, names, target_scene, folder / f"out-{i}-{len(rows)}",
+                        told,
                     ))  # fmt: skip
                 except Exception as exc:  # noqa: BLE001 - a refusal is a result
                     row["refused"] = f"{type(exc).__name__}: {exc}"
@@ -245,7 +272,7 @@ def main() -> None:
                 errors = {k: round(v["error"], 4) for k, v in row.get("params", {}).items()}
                 print(f"target {i} {label}: {errors or row.get('refused')}", file=sys.stderr, flush=True)
     print(json.dumps({
-        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "scene_ranges": ranges, "posterior": [str(p) for p in args.posterior or []] or "shipped",
+        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "scene_ranges": ranges, "posterior": [str(p) for p in args.posterior or []] or "shipped", "render_set_told": args.render_set_told,
         "first": args.first, "targets": args.targets, "summary": summarise(rows),
         "seconds": round(time.perf_counter() - started, 1),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": platform.processor()},
