@@ -107,7 +107,7 @@ def test_the_varied_numeric_settings_are_the_camera_and_their_ranges_scale_to_th
     assert render_context(ranges, told) == pytest.approx([-1.0, 1.0])
     assert render_outside(ranges, told) == []
     assert render_outside(ranges, {**told, "camera_azimuth_deg": 40.0}) == [
-        f"camera_azimuth_deg=40 (trained on {low:g}..{high:g})"
+        f"camera_azimuth_deg=40 (trained on {low:.3g}..{high:.3g})"
     ]
     with pytest.raises(UserInputError, match="image_size: the setting never varies"):
         render_ranges(["image_size"], zetas)
@@ -148,7 +148,7 @@ def test_an_estimator_told_the_camera_keeps_it_through_its_file_and_needs_it(toy
     with pytest.raises(UserInputError) as refused:
         told.condition(embedding, None)
     message = str(refused.value)
-    assert f"camera_azimuth_deg ({low:g}..{high:g}) was not given" in message
+    assert f"not given: camera_azimuth_deg (trained on {low:.3g}..{high:.3g})" in message
     assert "--render-set NAME=VALUE" in message and "drop --posterior" in message
     assert untold.condition(embedding, None, {"camera_azimuth_deg": 3.0}).shape == (2,)  # ignored
     # Told, the samples follow the camera: the azimuth's shift of the embedding is taken out.
@@ -173,7 +173,7 @@ def test_infer_refuses_without_the_told_camera_and_flags_one_outside_its_trainin
 
     told = PosteriorEstimator.load(toy[0])
     clip = Clip(np.zeros((10, 8, 8, 3), dtype=np.uint8), 25.0)
-    with pytest.raises(UserInputError, match="needs the render settings camera_azimuth_deg"):
+    with pytest.raises(UserInputError, match="needs 1 render setting; not given: camera_azimuth_deg"):
         posterior_of_clip(told, _Embedder(), clip, n_samples=200)
     report = posterior_of_clip(told, _Embedder(), clip, n_samples=200, render={"camera_azimuth_deg": 2.0})
     assert report.samples_unit.shape == (200, 2)
@@ -225,6 +225,12 @@ def test_flag_infer_tells_the_camera_with_render_set(physinfer_cli, tmp_path):
     assert proc.json()["render_set"]["fov_deg"] == 40
     proc = physinfer_cli(*common, "--out", str(tmp_path / "untold"))
     assert Path(proc.json()["estimator"]).name == "posterior_default.safetensors"
+    assert "notes" not in proc.json() and "render_set" not in proc.json()
+    # A camera outside its training ones: the default answers, and says why.
+    wide = [a for k, v in {**camera, "fov_deg": 70}.items() for a in ("--render-set", f"{k}={v}")]
+    proc = physinfer_cli(*common, *wide, "--out", str(tmp_path / "wide"))
+    assert Path(proc.json()["estimator"]).name == "posterior_default.safetensors"
+    assert "posterior_camera.safetensors: outside its training cameras: fov_deg=70" in proc.json()["notes"][0]
     camera_file = Path(proc.json()["estimator"]).with_name("posterior_camera.safetensors")
     proc = physinfer_cli(
         *common, "--posterior", str(camera_file), *told[:-2], "--out", str(tmp_path / "short")

@@ -269,10 +269,10 @@ class PosteriorEstimator:
         missing = sorted(name for name in told if name not in (render or {}))
         if not missing:
             return
-        spans = ", ".join(f"{name} ({told[name][0]:g}..{told[name][1]:g})" for name in missing)
+        spans = ", ".join(f"{name} (trained on {told[name][0]:.3g}..{told[name][1]:.3g})" for name in missing)
         raise UserInputError(
-            f"this posterior estimator is told the camera and light: it needs the render settings "
-            f"{', '.join(sorted(told))}, and {spans} {'was' if len(missing) == 1 else 'were'} not given",
+            f"this posterior estimator is told the camera and light and needs {len(told)} render "
+            f"setting{'s' if len(told) > 1 else ''}; not given: {spans}",
             remedy="give each with --render-set NAME=VALUE (the values the video was taken with), or use an "
             "estimator that averages over the camera (the plugin's default: drop --posterior)",
         )

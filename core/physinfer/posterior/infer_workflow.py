@@ -21,7 +21,12 @@ from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator
 from physinfer.posterior.figures import corner_figure, corner_plot
 from physinfer.posterior.inputs import MAX_OUTSIDE_SHARE
-from physinfer.posterior.loading import embed_target, estimator_embedder, load_estimator
+from physinfer.posterior.loading import (
+    embed_target,
+    estimator_embedder,
+    load_estimator,
+    told_passed_over,
+)
 from physinfer.posterior.summary import correlations, format_marginal, marginals
 from physinfer.registry import Registry
 from physinfer.report import write_report_quietly
@@ -224,6 +229,10 @@ def infer(
     report.truth = dict(target.truth) if target.truth else None
     report.scene = loaded.scene
     report.render_set = told or None
+    if told and posterior is None and not loaded.estimator.config.render_inputs:
+        report.notes += [
+            f"the camera told was not used by {why}" for why in told_passed_over(registry, plugin, loaded.scene, told)
+        ]
     report.target_conditions = target.conditions
     report.seconds["start_up"] = t_ready - t_start
     write_report(report, loaded.estimator, out, title=target.description)

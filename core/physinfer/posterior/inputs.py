@@ -171,5 +171,5 @@ def render_outside(ranges: Mapping[str, Sequence[float]] | None, told: Mapping[s
         value = _number(told.get(name))
         margin = RENDER_MARGIN * (high - low)
         if value is not None and not low - margin <= value <= high + margin:
-            outside.append(f"{name}={value:g} (trained on {low:g}..{high:g})")
+            outside.append(f"{name}={value:g} (trained on {low:.3g}..{high:.3g})")
     return outside

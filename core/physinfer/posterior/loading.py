@@ -103,15 +103,43 @@ def _shipped_told(
     ``render`` gives within its training ranges, and that covers ``scene``; or ``None``."""
     for path in _shipped_others(phenomenon):
         estimator = PosteriorEstimator.load(path, device=device)
-        told = estimator.config.render_inputs
-        if not told or any(name not in render for name in told) or estimator.render_outside(render):
-            continue
-        try:
-            estimator.check_scene(phenomenon, scene, path)
-        except UserInputError:
-            continue
-        return estimator, path
+        if estimator.config.render_inputs and _told_misfit(estimator, phenomenon, scene, render) is None:
+            return estimator, path
     return None
+
+
+def _told_misfit(
+    estimator: PosteriorEstimator, phenomenon: Any, scene: Mapping[str, Any] | None, render: Mapping[str, Any]
+) -> str | None:
+    """Why a shipped estimator told the camera does not answer for ``scene`` and ``render``
+    (settings not given, outside its ranges, another scene), or ``None`` when it does."""
+    missing = sorted(name for name in estimator.config.render_inputs or {} if name not in render)
+    if missing:
+        return f"it needs --render-set for {', '.join(missing)} too"
+    outside = estimator.render_outside(render)
+    if outside:
+        return f"outside its training cameras: {'; '.join(outside)}"
+    try:
+        estimator.check_scene(phenomenon, scene)
+    except UserInputError as exc:
+        return exc.reason
+    return None
+
+
+def told_passed_over(
+    registry: Registry, plugin: str, scene: Mapping[str, Any] | None, render: Mapping[str, Any]
+) -> list[str]:
+    """Why each of the phenomenon's shipped estimators told the camera was not chosen for
+    ``render`` (the user's ``--render-set``): ``["posterior_camera.safetensors: it needs
+    --render-set for fov_deg too"]``; for ``infer`` to say when the camera told went unused."""
+    phenomenon = registry.phenomenon(plugin)
+    reasons = []
+    for path in _shipped_others(phenomenon):
+        estimator = PosteriorEstimator.load(path)
+        why = _told_misfit(estimator, phenomenon, scene, render) if estimator.config.render_inputs else None
+        if why is not None:
+            reasons.append(f"{path.name}: {why}")
+    return reasons
 
 
 def _shipped_others(phenomenon: Any) -> list[Path]:
