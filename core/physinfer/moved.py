@@ -47,6 +47,7 @@ MOVED: Mapping[str, str] = MappingProxyType({
     **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.limit_text", "limit_line reveal_phrase"),
     **_entries("physinfer.datasets.engine", "physinfer.datasets.resume", "GenerateProgress"),
     **_entries("physinfer.datasets.engine", "physinfer.datasets.executors", "default_workers"),
+    **_entries("physinfer.posterior.estimator", "physinfer.posterior.flows", "EDGE FlowEnsemble to_unbounded"),
 })  # fmt: skip
 
 

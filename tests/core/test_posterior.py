@@ -157,7 +157,8 @@ def toy_estimator():
 def test_an_ensemble_is_a_mixture_of_its_seeded_flows_and_round_trips(tmp_path):
     import torch
 
-    from physinfer.posterior.estimator import FlowEnsemble, NetworkConfig, PosteriorEstimator
+    from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator
+    from physinfer.posterior.flows import FlowEnsemble
     from physinfer.posterior.training import train_estimator
 
     pairs, identity = _toy_pairs_and_identity()

@@ -42,13 +42,11 @@ from physinfer.api.options import (
     SearchOptions,
     SimulateOptions,
     TargetOptions,
-    as_assignments,
-    as_names,
-    required,
     with_settings,
 )
 from physinfer.api.plugins import registry
 from physinfer.api.results import Diagnosis, Simulation
+from physinfer.api.values import as_assignments, as_names, required
 from physinfer.discrepancy.decide import DecisionRule
 from physinfer.discrepancy.settings import DiagnoseSettings, LimitConfig
 from physinfer.discrepancy.workflow import run_diagnosis

@@ -9,9 +9,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from physinfer.api.options import PrepareOptions, RenderOptions, required, with_settings
+from physinfer.api.options import PrepareOptions, RenderOptions, with_settings
 from physinfer.api.plugins import registry
 from physinfer.api.results import frames_figure
+from physinfer.api.values import required
 from physinfer.conditioning import parse_roi
 from physinfer.errors import UserInputError
 from physinfer.framing import (

@@ -30,14 +30,19 @@ import torch
 from physinfer.devices import check_device
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
+from physinfer.moved import moved_names
 from physinfer.parameters import ParameterSpace
 from physinfer.posterior.fingerprint import PROBE_TOLERANCE, embedder_probe, probe_mismatch
+from physinfer.posterior.flows import build_network, to_unit
 from physinfer.posterior.inputs import check_inputs, render_context, render_outside
 from physinfer.scene import default_scene, same_scene, scene_context, scene_remedy, scene_text
 
 FORMAT_NAME = "physinfer-posterior"
 FORMAT_VERSION = 1
 DENSITY_MODELS = ("maf", "nsf", "mdn")
+
+#: The flows' names read here before they moved to :mod:`physinfer.posterior.flows` (warns).
+__getattr__ = moved_names(__name__)
 
 
 @dataclass(frozen=True)
@@ -460,64 +465,6 @@ def resolve_device(device: str | None) -> str:
     if checked is None:
         return "cuda" if torch.cuda.is_available() else "cpu"
     return checked
-
-
-#: Normalised coordinates are kept this far inside ``±1`` before ``atanh``.
-EDGE = 1e-6
-
-
-def to_unbounded(theta_unit: np.ndarray) -> np.ndarray:
-    """``[-1, 1]`` → the real line (``atanh``), where the flow is trained.
-
-    A flow on the bounded cube leaks mass outside it (three quarters of the flag's first
-    estimator's samples fell outside, and rejecting them made sampling ~4× slower); on the
-    real line every sample maps back inside.
-    """
-    return np.arctanh(np.clip(theta_unit, -1.0 + EDGE, 1.0 - EDGE))
-
-
-def to_unit(phi: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`to_unbounded` (``tanh``)."""
-    return np.tanh(phi)
-
-
-def build_network(config: EstimatorConfig) -> torch.nn.Module:
-    """An untrained network of ``config``'s shape (its z-scoring is replaced on loading)."""
-    gen = torch.Generator().manual_seed(0)
-    dim = len(config.parameters)
-    theta = torch.randn(16, dim, generator=gen)
-    x = torch.randn(16, config.x_dim, generator=gen)
-    members = [config.network.builder()(theta, x) for _ in range(config.network.ensemble)]
-    return members[0] if len(members) == 1 else FlowEnsemble(members)
-
-
-class FlowEnsemble(torch.nn.Module):
-    """An equal-weight mixture of sbi density estimators trained with different seeds.
-
-    Sampling draws ``n // K`` samples from each member (the first ``n % K`` members one
-    more): a stratified draw from the mixture, with less spread between calls than picking
-    each sample's member at random. A single-member estimator is stored as the bare sbi
-    network (files written before ensembles existed load unchanged).
-
-    Args:
-        members: The trained estimators (each with ``sample(shape, condition=...)``).
-    """
-
-    def __init__(self, members: list[torch.nn.Module]) -> None:
-        super().__init__()
-        self.members = torch.nn.ModuleList(members)
-
-    def sample(self, sample_shape: tuple[int, ...], condition: torch.Tensor) -> torch.Tensor:
-        """``(n, B, D)`` samples for conditions ``(B, E)``, ``sample_shape = (n,)``."""
-        (n,) = sample_shape
-        k = len(self.members)
-        counts = [n // k + (1 if i < n % k else 0) for i in range(k)]
-        draws = [
-            m.sample((c,), condition=condition)
-            for m, c in zip(self.members, counts, strict=True)
-            if c
-        ]
-        return torch.cat(draws, dim=0)
 
 
 def _digest(tensors: Mapping[str, torch.Tensor], config_json: str) -> str:

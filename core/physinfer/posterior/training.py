@@ -19,14 +19,9 @@ import numpy as np
 import torch
 
 from physinfer.errors import UserInputError
-from physinfer.posterior.estimator import (
-    EstimatorConfig,
-    FlowEnsemble,
-    NetworkConfig,
-    PosteriorEstimator,
-    to_unbounded,
-)
+from physinfer.posterior.estimator import EstimatorConfig, NetworkConfig, PosteriorEstimator
 from physinfer.posterior.features import EmbeddedSet
+from physinfer.posterior.flows import FlowEnsemble, to_unbounded
 from physinfer.posterior.inputs import input_statistics
 
 #: Epochs between two progress reports.
