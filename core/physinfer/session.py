@@ -14,7 +14,7 @@ warning (:data:`physinfer.moved.MOVED`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -90,7 +90,7 @@ def run(registry: Registry, request: RefineRequest, *, progress: Progress = True
     execution, search = request.execution, request.search
     run_dir = execution.run_directory(request.target.target_path)
     setup = _set_up(registry, request)
-    amortized, amortized_note = _amortized_posterior(registry, setup, search)
+    amortized, amortized_note = _amortized_posterior(registry, setup, search, request.target.render_set)
     budget = search.budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
     if execution.resume:
         _check_resumed_target(run_dir, request)
@@ -157,8 +157,11 @@ def _set_up(registry: Registry, request: RefineRequest) -> _SetUp:
     return _SetUp(model, model_file, pipeline, scene, fixed_values, target)
 
 
-def _amortized_posterior(registry: Registry, setup: _SetUp, search: SearchSpec) -> tuple[Any, str | None]:
-    """The target's amortized posterior and why there is none (:func:`posterior_for_refinement`)."""
+def _amortized_posterior(
+    registry: Registry, setup: _SetUp, search: SearchSpec, render_set: Mapping[str, Any] | None
+) -> tuple[Any, str | None]:
+    """The target's amortized posterior and why there is none (:func:`posterior_for_refinement`);
+    the camera the user told (``--render-set``) goes to an estimator told the camera."""
     if not search.use_posterior:
         return None, None
     # Imported here: torch and sbi take seconds, and a run without an estimator needs neither.
@@ -167,7 +170,7 @@ def _amortized_posterior(registry: Registry, setup: _SetUp, search: SearchSpec) 
     return posterior_for_refinement(
         registry, plugin=setup.model.plugin, parameter_space=setup.pipeline.simulator.parameter_space,
         clip=setup.target.clip, posterior=search.posterior, device=setup.model.device, seed=search.seed,
-        scene=setup.scene,
+        scene=setup.scene, render={name: setup.target.render_params[name] for name in render_set or {}} or None,
     )  # fmt: skip
 
 

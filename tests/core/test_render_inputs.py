@@ -238,3 +238,33 @@ def test_flag_infer_tells_the_camera_with_render_set(physinfer_cli, tmp_path):
     assert proc.returncode == 2 and "ambient_intensity" in proc.json()["error"] and "--render-set" in proc.json()["error"]
     proc = physinfer_cli(*common, *told, "--render-set", "fov_dgr=40", "--out", str(tmp_path / "typo"))
     assert proc.returncode == 2 and "fov_dgr" in proc.json()["error"]
+
+
+@pytest.mark.skipif(
+    not (Path(__file__).parents[2] / "plugins/flag/physinfer_flag/data/posterior_camera.safetensors").is_file(),
+    reason="the flag's estimator told the camera is not shipped in this checkout",
+)
+def test_refine_starts_from_the_estimator_told_the_camera_when_render_set_tells_it():
+    """``refine --render-set`` (the camera of the user's video) chooses and conditions the
+    shipped estimator told the camera, as ``infer --render-set`` does."""
+    from physinfer.plugins import load_registry
+    from physinfer.posterior.infer_workflow import posterior_for_refinement
+
+    registry = load_registry()[0]
+    phenomenon = registry.phenomenon("flag")
+    target = phenomenon.default_target()
+    camera = {
+        "camera_azimuth_deg": 0.0, "camera_elevation_deg": -5.0, "fov_deg": 40.0, "framing": 1.0,
+        "light_intensity": 2.5, "ambient_intensity": 0.3,
+    }  # fmt: skip
+
+    def estimator(render):
+        report, why = posterior_for_refinement(
+            registry, plugin="flag", parameter_space=phenomenon.parameter_space, clip=target.clip,
+            posterior=None, device="cpu", n_samples=200, render=render,
+        )  # fmt: skip
+        assert report is not None, why
+        return Path(report.estimator).name
+
+    assert estimator(camera) == "posterior_camera.safetensors"
+    assert estimator(None) == "posterior_default.safetensors"

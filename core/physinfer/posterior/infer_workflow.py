@@ -390,6 +390,7 @@ def posterior_for_refinement(
     seed: int = 0,
     n_samples: int = 5000,
     scene: Mapping[str, Any] | None = None,
+    render: Mapping[str, Any] | None = None,
 ) -> tuple[PosteriorReport | None, str | None]:
     """The amortized posterior of a refinement's target, or why there is none.
 
@@ -401,6 +402,8 @@ def posterior_for_refinement(
     shipped, when the posterior of this clip is degenerate or extrapolated (a search started
     there starts in the wrong place). ``scene``: the
     complete scene (:func:`physinfer.scene.resolve_scene`), ``None`` for the default.
+    ``render``: the render settings the user told (``--render-set``, typed), which choose and
+    condition an estimator told the camera, as ``infer``'s do.
 
     Returns:
         ``(report, None)``, or ``(None, reason)`` (``reason`` is ``None`` when the
@@ -410,7 +413,7 @@ def posterior_for_refinement(
     if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
         return None, None
     try:
-        estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene)
+        estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene, render=render)
         estimator.check_for(plugin, parameter_space, path)
         estimator.check_scene(phenomenon, scene, path)
         pipeline = estimator_embedder(registry, estimator, device)
@@ -421,6 +424,7 @@ def posterior_for_refinement(
             n_samples=n_samples,
             seed=seed,
             scene=scene or default_scene(phenomenon),
+            render=render,
         )
         pipeline.renderer.close()
     except UserInputError as exc:
