@@ -107,10 +107,8 @@ def closest_unnamed(
     """
     if not misspecified or named is not None or not candidates:
         return None
-    best = min(candidates, key=lambda c: float(c.get("ratio", np.inf)))
-    name = str(best["effect"])
+    best, name, failed = _closest(candidates)
     end = ends.get(name, {})
-    failed = [_CHECK_WORDS.get(k, k) for k, ok in (best.get("checks") or {}).items() if not ok]
     partners = _partners(best.get("limit") or {}, end)
     trapped = bool(end.get("at_baseline") or end.get("effect_off"))
     settle = [f"more trials for the effects' searches (--effect-steps {2 * effect_steps})"]
@@ -175,13 +173,11 @@ def closest_lead(
     """
     if misspecified or named is not None or not candidates:
         return None
-    best = min(candidates, key=lambda c: float(c.get("ratio", np.inf)))
+    best, name, failed = _closest(candidates)
     ratio = float(best.get("ratio", np.inf))
-    name = str(best["effect"])
     if not ratio <= LEAD_RATIO or ends.get(name, {}).get("effect_off", False):
         return None
     values = {str(k): float(v) for k, v in (best.get("effect_params") or {}).items()}
-    failed = [_CHECK_WORDS.get(k, k) for k, ok in (best.get("checks") or {}).items() if not ok]
     settle = [f"a longer clip (--duration {2 * clip_seconds:.3g})"] if clip_seconds else []
     settle.append(f"more trials for the effects' searches (--effect-steps {2 * effect_steps})")
     at = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
@@ -192,6 +188,13 @@ def closest_lead(
     )
     return {"effect": name, "ratio": ratio, "effect_params": values, "failed": failed, "settle": settle,
             "message": message}  # fmt: skip
+
+
+def _closest(candidates: Sequence[Mapping[str, Any]]) -> tuple[Mapping[str, Any], str, list[str]]:
+    """The candidate with the smallest gap ratio, its name and the checks it failed, in words."""
+    best = min(candidates, key=lambda c: float(c.get("ratio", np.inf)))
+    failed = [_CHECK_WORDS.get(k, k) for k, ok in (best.get("checks") or {}).items() if not ok]
+    return best, str(best["effect"]), failed
 
 
 def _partners(limit: Mapping[str, Any], end: Mapping[str, Any]) -> list[str]:
