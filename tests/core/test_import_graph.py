@@ -170,6 +170,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.discrepancy.needed_calibration": "",
         "physinfer.discrepancy.parallel": "",
         "physinfer.discrepancy.progress": "",
+        "physinfer.discrepancy.records": "",
         "physinfer.discrepancy.refit": "",
         "physinfer.discrepancy.reveal": "",
         "physinfer.discrepancy.ridge": "",

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.discrepancy.figures import gaps_figure
+from physinfer.discrepancy.records import Candidate, Screened, Verdict
 from physinfer.types import Clip, Trajectory
 
 
@@ -88,21 +89,32 @@ class Diagnosis:
         named_effect: The effect that closes the gap, or ``None``.
         gap_before: The baseline fit's gap to the target.
         gap_after: The gap with the named effect (the baseline's when none is named).
-        candidates: One dict per effect tried (gap, ratio, p-value, significance, ...).
+        candidates: One :class:`~physinfer.discrepancy.records.Candidate` per effect refined
+            (gap, ratio, p-value, significance, ...); each also reads as its dict
+            (``d.candidates[0]["gap"]``).
         out: The diagnosis directory.
-        screened: The effects left out before refinement, each with its ``reason`` (no fit
-            could name them on this target; see :mod:`physinfer.discrepancy.screen`).
         report: Everything ``diagnosis.json`` holds.
+        screened: The effects left out before refinement, each a
+            :class:`~physinfer.discrepancy.records.Screened` with its ``reason`` (no fit could
+            name them on this target; see :mod:`physinfer.discrepancy.screen`).
+        verdict: The decision as a :class:`~physinfer.discrepancy.records.Verdict`: by which
+            test, the threshold, and the notes (``named_leaves``, ``unnamed``, ``lead``);
+            :meth:`from_report` always sets it; given ``None``, it is read from ``report``.
     """
 
     misspecified: bool
     named_effect: str | None
     gap_before: float
     gap_after: float
-    candidates: list[dict[str, Any]]
+    candidates: list[Candidate]
     out: Path
     report: dict[str, Any]
-    screened: list[dict[str, Any]] = field(default_factory=list)
+    screened: list[Screened] = field(default_factory=list)
+    verdict: Verdict | None = None
+
+    def __post_init__(self) -> None:
+        if self.verdict is None and "tested_gap" in self.report:  # a report diagnose wrote
+            self.verdict = Verdict.from_report(self.report)
 
     @classmethod
     def from_report(cls, report: dict[str, Any], out: Path) -> Diagnosis:
@@ -112,10 +124,11 @@ class Diagnosis:
             named_effect=report.get("named_effect"),
             gap_before=float(report["gap_before"]),
             gap_after=float(report["gap_after"]),
-            candidates=list(report.get("candidates", [])),
+            candidates=[Candidate.from_dict(c) for c in report.get("candidates", [])],
             out=Path(out),
             report=report,
-            screened=list(report.get("screened") or []),
+            screened=[Screened.from_dict(s) for s in report.get("screened") or []],
+            verdict=Verdict.from_report(report),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -127,10 +140,7 @@ class Diagnosis:
         scale and the threshold (a matplotlib figure; ``gaps.png`` is the same drawing)."""
         best = self.report["best_baseline"]
         models = [{"label": "baseline (best)", "gap": best["gap"], "distances": best["to_target"]}]
-        models += [
-            {"label": c["effect"], "gap": c["gap"], "distances": c.get("distances", [])}
-            for c in self.candidates
-        ]
+        models += [{"label": c.effect, "gap": c.gap, "distances": list(c.distances)} for c in self.candidates]
         return gaps_figure(
             models,
             floor=self.report["noise_floor"],

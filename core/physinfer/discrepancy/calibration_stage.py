@@ -11,6 +11,7 @@ from physinfer.discrepancy.decide import null_scale
 from physinfer.discrepancy.needed_calibration import CalibrationRun, next_to_refine, scale_bounds
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, stage_jobs
 from physinfer.discrepancy.progress import StageClock
+from physinfer.discrepancy.records import Candidate, Verdict
 from physinfer.discrepancy.stages import calibration_run
 from physinfer.evaluation import Pipeline
 from physinfer.progress import StageProgress
@@ -21,7 +22,7 @@ if TYPE_CHECKING:
 
 Log = Callable[[str], None]
 #: Every decision at a null scale: the candidates' records, the verdict, the named effect.
-Judge = Callable[[float], tuple[list[dict[str, Any]], dict[str, Any], str | None]]
+Judge = Callable[[float], tuple[list[Candidate], Verdict, str | None]]
 
 
 def _signature(judged: Judge) -> Callable[[float], Any]:
@@ -29,7 +30,7 @@ def _signature(judged: Judge) -> Callable[[float], Any]:
 
     def signature(scale: float) -> Any:
         candidates, verdict, named = judged(scale)
-        return (verdict["gap_test"], tuple(c["significant"] for c in candidates), verdict["misspecified"], named)
+        return (verdict.gap_test, tuple(c.significant for c in candidates), verdict.misspecified, named)
 
     return signature
 

@@ -70,12 +70,13 @@ ties), and only when the baseline is misspecified (by either test).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from physinfer.discrepancy.records import Verdict
 from physinfer.errors import UserInputError
 
 #: Accepted values of :attr:`DecisionRule.calibration_summary`.
@@ -159,32 +160,40 @@ def misspecification(gap: float, scale: float, rule: DecisionRule) -> dict[str, 
 
 
 def final_verdict(
-    gap_verdict: dict[str, Any],
-    candidates: Sequence[dict[str, Any]],
+    gap_verdict: Mapping[str, Any],
+    candidates: Sequence[Mapping[str, Any]],
     rule: DecisionRule,
     n_candidates: int | None = None,
-) -> dict[str, Any]:
+) -> Verdict:
     """Combine the gap test with the effect test (see the module docstring).
 
     Args:
         gap_verdict: :func:`misspecification`'s result.
-        candidates: Every candidate with its ``significant`` decision and ``p_value``.
+        candidates: Every candidate with its ``significant`` decision and ``p_value``
+            (:class:`~physinfer.discrepancy.records.Candidate` records or their dicts).
         rule: Thresholds; ``effect_evidence`` switches the effect test on.
         n_candidates: The Bonferroni divisor (``None``: ``len(candidates)``); a diagnosis
             that screened some candidates out still counts them
             (:mod:`physinfer.discrepancy.screen`).
 
     Returns:
-        ``gap_verdict`` with ``gap_test`` (its own ``misspecified``), ``evidence`` (the
+        The verdict of the tests: ``gap_verdict``'s ``threshold``, ``tested_gap`` and
+        ``gap_over_null``, with ``gap_test`` (its own ``misspecified``), ``evidence`` (the
         tests that found the model misspecified: ``"gap"``, ``"effect"``) and the final
-        ``misspecified``.
+        ``misspecified`` (no effect named yet).
     """
     tried = len(candidates) if n_candidates is None else n_candidates
     level = rule.alpha / max(tried, 1)  # Bonferroni over the candidates
     by_effect = rule.effect_evidence and any(c["significant"] and c["p_value"] < level for c in candidates)
     evidence = [name for name, hit in (("gap", gap_verdict["misspecified"]), ("effect", by_effect)) if hit]
-    return {**gap_verdict, "gap_test": bool(gap_verdict["misspecified"]), "evidence": evidence,
-            "misspecified": bool(evidence)}
+    return Verdict(
+        misspecified=bool(evidence),
+        threshold=gap_verdict["threshold"],
+        tested_gap=gap_verdict["tested_gap"],
+        gap_over_null=gap_verdict["gap_over_null"],
+        gap_test=bool(gap_verdict["misspecified"]),
+        evidence=tuple(evidence),
+    )
 
 
 def rank_test_less(a: Sequence[float], b: Sequence[float]) -> float:
@@ -247,8 +256,9 @@ def effect_significance(
     }
 
 
-def name_effect(candidates: Sequence[dict[str, Any]], misspecified: bool) -> str | None:
-    """The significant candidate with the smallest gap (fewer parameters on ties), if misspecified."""
+def name_effect(candidates: Sequence[Mapping[str, Any]], misspecified: bool) -> str | None:
+    """The significant candidate with the smallest gap (fewer parameters on ties), if misspecified
+    (:class:`~physinfer.discrepancy.records.Candidate` records or their dicts)."""
     if not misspecified:
         return None
     winners = [c for c in candidates if c["significant"]]

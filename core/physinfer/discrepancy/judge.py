@@ -7,6 +7,7 @@ the one it reports; the rules themselves are in :mod:`physinfer.discrepancy.deci
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -17,6 +18,7 @@ from physinfer.discrepancy.decide import (
     misspecification,
     name_effect,
 )
+from physinfer.discrepancy.records import Candidate, Verdict
 from physinfer.discrepancy.stages import Stage
 
 
@@ -27,35 +29,39 @@ def judge_stages(
     scale: float,
     rule: DecisionRule,
     effect_objs: Mapping[str, Any],
-) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
+) -> tuple[list[Candidate], Verdict, str | None]:
     """Every decision at null scale ``scale``: the candidates' records, the verdict, the named effect."""
     gap_before = float(before.gap.gap)
-    candidates = []
-    for stage in stages[1:]:
-        decision = effect_significance(
-            distances=stage.gap.to_target or [],
-            baseline_distances=before.gap.to_target or [],
-            gap=float(stage.gap.gap),
-            gap_before=gap_before,
-            n_params=stage.n_params,
-            scale=scale,
-            rule=rule,
-        )
-        candidates.append(
-            {
-                "effect": stage.label,
-                "description": effect_objs[stage.label].description,
-                "gap": float(stage.gap.gap),
-                "n_params": stage.n_params,
-                **decision,
-                "best_params": stage.result.best_params,
-                "effect_params": {k: stage.result.best_params[k] for k in effect_objs[stage.label].parameter_space.names},
-                "at_bounds": stage.result.extra.get("at_bounds", {}),
-                "distances": list(stage.gap.to_target or []),
-                "floor": stage.gap.floor,
-                "run_dir": stage.result.run_dir,
-            }
-        )
+    candidates = [_candidate(stage, before, gap_before, scale, rule, effect_objs[stage.label]) for stage in stages[1:]]
     # Candidates screened out count in the effect test's divisor: the others' levels do not change.
-    verdict = final_verdict(misspecification(tested, scale, rule), candidates, rule, n_candidates=len(effect_objs))
-    return candidates, verdict, name_effect(candidates, verdict["misspecified"])
+    tests = final_verdict(misspecification(tested, scale, rule), candidates, rule, n_candidates=len(effect_objs))
+    named = name_effect(candidates, tests.misspecified)
+    after = next((s for s in stages if s.label == named), before)
+    verdict = dataclasses.replace(tests, named_effect=named, gap_before=gap_before, gap_after=float(after.gap.gap))
+    return candidates, verdict, named
+
+
+def _candidate(stage: Stage, before: Stage, gap_before: float, scale: float, rule: DecisionRule, effect: Any) -> Candidate:
+    """One effect's stage judged against the best baseline fit ``before``."""
+    decision = effect_significance(
+        distances=stage.gap.to_target or [],
+        baseline_distances=before.gap.to_target or [],
+        gap=float(stage.gap.gap),
+        gap_before=gap_before,
+        n_params=stage.n_params,
+        scale=scale,
+        rule=rule,
+    )
+    return Candidate(
+        effect=stage.label,
+        description=effect.description,
+        gap=float(stage.gap.gap),
+        n_params=stage.n_params,
+        **decision,
+        best_params=stage.result.best_params,
+        effect_params={k: stage.result.best_params[k] for k in effect.parameter_space.names},
+        at_bounds=stage.result.extra.get("at_bounds", {}),
+        distances=tuple(stage.gap.to_target or []),
+        floor=stage.gap.floor,
+        run_dir=stage.result.run_dir,
+    )

@@ -145,13 +145,13 @@ def check_one(
     record = {"effect": name, "significant": decision["significant"], "p_value": decision["p_value"]}
     verdict = final_verdict(misspecification(float(before.gap), scale, settings.rule), [record], settings.rule,
                             n_candidates=n_candidates)  # fmt: skip
-    named = bool(verdict["misspecified"] and decision["significant"])
+    named = bool(verdict.misspecified and decision["significant"])
     off = warm_start(baseline.best_params, [effect])
     return {
         "fraction": fraction,
         "values": {k: v for k, v in values.items() if k in moved},
         "named": named,
-        "misspecified": bool(verdict["misspecified"]),
+        "misspecified": bool(verdict.misspecified),
         "significant": bool(decision["significant"]),
         "gap_before": float(before.gap),
         "gap": float(stage.gap.gap),
@@ -216,12 +216,23 @@ def check_limits(
 
 
 def apply_checks(candidates: list[dict[str, Any]], checked: Mapping[str, Mapping[str, Any]]) -> None:
-    """Put each checked limit in its candidate's record: ``detectable_from`` becomes the
-    checked one, the ladder's is kept as ``limit.local_detectable_from``, the records as
-    ``limit.search_check`` (and the reason, where none was named, as ``limit.reason``)."""
+    """Put each checked limit in its candidate's dict record (in place; see :func:`checked_limit`)."""
     for cand in candidates:
         if (check := checked.get(cand["effect"])) is not None:
-            cand["limit"].update(local_detectable_from=cand["detectable_from"], search_check=dict(check))
-            cand["detectable_from"] = check["detectable_from"]
-            if check["reason"]:
-                cand["limit"]["reason"] = check["reason"]
+            cand["detectable_from"], cand["limit"] = checked_limit(cand["detectable_from"], cand["limit"], check)
+
+
+def checked_limit(
+    detectable_from: Mapping[str, float] | None, limit: Mapping[str, Any], check: Mapping[str, Any]
+) -> tuple[Mapping[str, float] | None, dict[str, Any]]:
+    """A candidate's limit once checked: ``detectable_from`` becomes the checked one, the
+    ladder's is kept as ``limit.local_detectable_from``, the records as ``limit.search_check``
+    (and the reason, where none was named, as ``limit.reason``).
+
+    Returns:
+        The new ``detectable_from`` and ``limit``.
+    """
+    limit = {**limit, "local_detectable_from": detectable_from, "search_check": dict(check)}
+    if check["reason"]:
+        limit["reason"] = check["reason"]
+    return check["detectable_from"], limit

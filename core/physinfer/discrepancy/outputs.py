@@ -13,6 +13,7 @@ from physinfer.discrepancy.figures import plot_gaps, plot_maps
 from physinfer.discrepancy.gap import gap_numbers
 from physinfer.discrepancy.localise import localise
 from physinfer.discrepancy.model import ModelFile, write_model
+from physinfer.discrepancy.records import Candidate, Verdict
 from physinfer.discrepancy.stages import Stage, clip_of
 from physinfer.noise import NoiseFloor
 from physinfer.pipeline import fixed_by_user, full_parameter_space
@@ -37,8 +38,10 @@ class Findings:
         before: The best baseline fit any stage found (an effect must beat it).
         after: The named effect's stage (``before`` when nothing is named).
         named: The named effect, or ``None``.
-        candidates: One record per candidate effect.
-        verdict: The decision's record (``misspecified``, ``evidence``, ``threshold``, …).
+        candidates: One record per refined candidate effect (its detection limit set once the
+            limits ran); ``diagnosis.json`` holds their ``to_dict()``.
+        verdict: The decision (misspecified, by which test, the effect named; the notes on it
+            once the workflow added them).
         scale: The null scale the decisions are made at.
         self_gap: The self-consistency runs' summary gap (``None``: not every run refined).
         calibration: Each self-consistency run's record.
@@ -50,8 +53,8 @@ class Findings:
     before: Stage
     after: Stage
     named: str | None
-    candidates: list[dict[str, Any]]
-    verdict: dict[str, Any]
+    candidates: list[Candidate]
+    verdict: Verdict
     scale: float
     self_gap: float | None
     calibration: Sequence[Mapping[str, Any]]
@@ -67,7 +70,7 @@ def write_outputs(settings: DiagnoseSettings, target: Target, found: Findings) -
     model = _write_model_file(settings, found.after)
     return {
         **_decision_numbers(settings, target, found),
-        "candidates": found.candidates,
+        "candidates": [c.to_dict() for c in found.candidates],
         "regions": numbers["regions"],
         "localisation": numbers["global"],
         "regions_after": None if after_numbers is None else after_numbers["regions"],
@@ -114,7 +117,7 @@ def _draw_figures(settings: DiagnoseSettings, rows: list[tuple[str, Any]], found
     return {
         "maps": str(plot_maps(rows, settings.out / "maps.png")),
         "gaps": str(
-            plot_gaps(models, floor=before.gap.floor, scale=found.scale, threshold=found.verdict["threshold"],
+            plot_gaps(models, floor=before.gap.floor, scale=found.scale, threshold=found.verdict.threshold,
                       named=found.named, path=settings.out / "gaps.png")  # fmt: skip
         ),
     }
@@ -145,20 +148,20 @@ def _decision_numbers(settings: DiagnoseSettings, target: Target, found: Finding
         "plugin": settings.plugin,
         "target": str(settings.target_path) if settings.target_path else "default",
         "truth": target.truth,
-        "misspecified": verdict["misspecified"],
-        "misspecified_by": verdict["evidence"],
-        "gap_test": verdict["gap_test"],
+        "misspecified": verdict.misspecified,
+        "misspecified_by": list(verdict.evidence),
+        "gap_test": verdict.gap_test,
         "named_effect": found.named,
         "gap_before": gap_before,
         "gap_after": gap_after,
         "gap_ratio": gap_after / gap_before if gap_before > 0 else None,
         "noise_floor": before.gap.floor,
         "null_scale": found.scale,
-        "threshold": verdict["threshold"],
+        "threshold": verdict.threshold,
         "self_consistency_gap": found.self_gap,
         "self_consistency_gaps": [run["gap"] for run in found.calibration],
         "calibration": [dict(run) for run in found.calibration],
-        "tested_gap": verdict["tested_gap"],
+        "tested_gap": verdict.tested_gap,
         "baseline": {
             "best_params": baseline.best_params,
             "best_distance": baseline.best_distance,

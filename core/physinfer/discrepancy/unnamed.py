@@ -91,8 +91,9 @@ def closest_unnamed(
     """The report's ``unnamed``: ``None`` unless the model is misspecified and nothing named.
 
     Args:
-        candidates: The refined candidates' records (``effect``, ``ratio``, ``checks``;
-            ``limit`` where the detection limits ran).
+        candidates: The refined candidates (:class:`~physinfer.discrepancy.records.Candidate`
+            records or their dicts: ``effect``, ``ratio``, ``checks``; ``limit`` where the
+            detection limits ran).
         ends: Effect name → :func:`search_end`'s record of its search.
         misspecified: The verdict.
         named: The named effect.
@@ -159,8 +160,8 @@ def closest_lead(
     effect off). The decision is unchanged: a lead is not a name.
 
     Args:
-        candidates: The refined candidates' records (``effect``, ``ratio``, ``checks``,
-            ``effect_params``).
+        candidates: The refined candidates (:class:`~physinfer.discrepancy.records.Candidate`
+            records or their dicts: ``effect``, ``ratio``, ``checks``, ``effect_params``).
         ends: Effect name → :func:`search_end`'s record of its search.
         misspecified: The verdict.
         named: The named effect.

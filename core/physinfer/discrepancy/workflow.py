@@ -52,11 +52,12 @@ from physinfer.discrepancy.calibration_stage import (
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import remainder_after_naming, self_consistency_gap
 from physinfer.discrepancy.judge import judge_stages
-from physinfer.discrepancy.limit_check import apply_checks, check_limits
+from physinfer.discrepancy.limit_check import check_limits, checked_limit
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.outputs import Findings, write_outputs
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
+from physinfer.discrepancy.records import Candidate, Screened, Verdict
 from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.screen import refined_already, screen_effects
 from physinfer.discrepancy.stages import (
@@ -260,12 +261,12 @@ def _diagnose_stages(
     # 4. The self-consistency runs (the null scale's optimizer part), as many as decide.
     found, scale_range = _decide(run, baseline, gap0, stages, job_args, effects)
     say("[5/6] " + (f"named: {found.named}" if found.named else "no effect explains the gap"))
-    remainder = remainder_after_naming(found.named, float(found.after.gap.gap), float(found.verdict["threshold"]))
+    remainder = remainder_after_naming(found.named, float(found.after.gap.gap), float(found.verdict.threshold))
     if remainder is not None:
         say("      " + remainder["message"])
-    limits, limits_at = _limits(run, found, screened, refined, scale_range)
+    found, limits, limits_at = _limits(run, found, screened, refined, scale_range)
     ends = {s.label: stage_end(s, baseline.best_params) for s in stages[1:]}
-    misspecified = bool(found.verdict["misspecified"])
+    misspecified = found.verdict.misspecified
     clip_seconds = None if limits is None else limits.get("clip_seconds")
     unnamed = closest_unnamed(
         found.candidates, ends, misspecified=misspecified, named=found.named, baseline_best=found.before.best_params,
@@ -276,20 +277,21 @@ def _diagnose_stages(
     for note in (unnamed, lead):
         if note is not None:
             say("      " + note["message"])
+    verdict = dataclasses.replace(found.verdict, named_leaves=remainder, unnamed=unnamed, lead=lead)
+    found = dataclasses.replace(found, verdict=verdict)
     say("[6/6] localising and writing outputs")
     with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
-    report["named_leaves"] = remainder
-    report["unnamed"] = unnamed
-    report["lead"] = lead
+    report["named_leaves"] = verdict.named_leaves
+    report["unnamed"] = verdict.unnamed
+    report["lead"] = verdict.lead
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}
         limits.update(null_scale=limits_at, null_scale_exact=scale_range[0] == scale_range[1])
     report["limits"] = limits
     report["screened"] = [
-        {"effect": name, "description": effect_objs[name].description, "reason": record["reason"],
-         "rungs": record["rungs"]}  # fmt: skip
+        Screened(name, effect_objs[name].description, record["reason"], record["rungs"]).to_dict()
         for name, record in screened.items()
     ]
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in run.clock.seconds.items()}, **workers}
@@ -414,7 +416,7 @@ def _decide(
     # baseline stage's.
     tested = float(before.gap.gap) if settings.calibrate and settings.calibration_control else float(gap0.gap)
 
-    def judged(scale: float) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
+    def judged(scale: float) -> tuple[list[Candidate], Verdict, str | None]:
         return judge_stages(stages, before, tested, scale, settings.rule, run.effect_objs)
 
     calibration, scale, scale_range = calibrate(
@@ -428,9 +430,9 @@ def _decide(
         calibration and every_run) else None  # fmt: skip
     say(
         f"      gap {tested:.4g}, noise floor at the baseline fit {gap0.floor:.4g}, null scale {scale_text(scale_range)} → "
-        + ("misspecified" if verdict["gap_test"] else "within what a correct model leaves")
+        + ("misspecified" if verdict.gap_test else "within what a correct model leaves")
     )
-    if verdict["evidence"] == ["effect"]:
+    if verdict.evidence == ("effect",):
         say("      an effect's significant improvement shows the baseline misspecified (the gap test alone did not)")
     after = next((s for s in stages if s.label == named), before)
     found = Findings(baseline, gap0, stages, before, after, named, candidates, verdict, scale, self_gap, calibration)
@@ -439,15 +441,16 @@ def _decide(
 
 def _limits(
     run: _Run, found: Findings, screened: Mapping[str, Any], refined: Mapping[str, Any], scale_range: tuple[float, float]
-) -> tuple[dict[str, Any] | None, float | None]:
-    """Each candidate's detection limit (set on its record), checked by the search where asked.
+) -> tuple[Findings, dict[str, Any] | None, float | None]:
+    """Each candidate's detection limit, checked by the search where asked.
 
     Returns:
-        The limits' record and the null scale they assume, or ``(None, None)`` without limits.
+        The findings with each candidate's limit set, the limits' record and the null scale
+        they assume (the findings as they were, ``None`` and ``None`` without limits).
     """
     settings, effect_objs = run.settings, run.effect_objs
     if not settings.limits:
-        return None, None
+        return found, None, None
     runs = settings.calibration_runs if settings.calibrate else 0
     n_sims = diagnosis_simulations(settings, [found.baseline, *(s.result for s in found.stages)], runs,
                                     n_gaps=2 + runs * (2 if settings.calibration_control else 1)
@@ -457,13 +460,15 @@ def _limits(
     with run.clock.stage("limits"):
         limits = run_limits(run.registry, settings, run.base, run.target, found.before, refined, limits_at, n_sims,
                             run.say, run.pool, scale_low=low, n_candidates=len(effect_objs))  # fmt: skip
-    for cand in found.candidates:
-        lim = limits["effects"][cand["effect"]]
-        cand["detectable_from"] = lim["detectable_from"]
-        cand["limit"] = {k: v for k, v in lim.items() if k != "detectable_from"}
+    candidates = [
+        c.with_limit(lim["detectable_from"], {k: v for k, v in lim.items() if k != "detectable_from"})
+        for c, lim in ((c, limits["effects"][c.effect]) for c in found.candidates)
+    ]
     if settings.limit_config.search_check:
         with run.clock.stage("limit_check"):
-            apply_checks(found.candidates, check_limits(
+            checked = check_limits(
                 run.registry, settings, run.base, run.target, found.before.best_params, limits["effects"], refined,
-                found.named, limits_at, len(effect_objs), run.steps, run.effect_steps, tuple(run.seeds), run.say))  # fmt: skip
-    return limits, limits_at
+                found.named, limits_at, len(effect_objs), run.steps, run.effect_steps, tuple(run.seeds), run.say)  # fmt: skip
+        candidates = [c if (check := checked.get(c.effect)) is None
+                      else c.with_limit(*checked_limit(c.detectable_from, c.limit or {}, check)) for c in candidates]  # fmt: skip
+    return dataclasses.replace(found, candidates=candidates), limits, limits_at
