@@ -130,7 +130,7 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
     if amortized is not None:
         posterior_rows = _posterior_rows(result, amortized, pipeline.simulator.parameter_space, post_start, target, out)
     wall = time.perf_counter() - start
-    floor = result.extra.get("noise_floor") or {}
+    floor = result.noise.floor or {}  # the loop always reports its noise
     return {
         "optimizer": optimizer,
         "wall_time_s": wall,
@@ -141,10 +141,10 @@ def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, arg
         "abs_errors": result.abs_errors,
         "best_distance": result.best_distance,
         "noise_ratio": floor.get("ratio"),
-        "observation_sem": result.extra.get("observation_sem"),
+        "observation_sem": result.noise.observation_sem,
         "n_failed": result.n_failed,
         "trials_reused": resume,
-        "selection_s": (result.extra.get("selection") or {}).get("selection_s"),
+        "selection_s": (result.selection or {}).get("selection_s"),
         **posterior_rows,
     }
 
@@ -159,11 +159,11 @@ def _posterior_rows(result: Any, amortized: Any, space: Any, post_start: Any, ta
     report_posterior(result, amortized, space, post_start, out, seed=0)
     box, _ = refine_posterior(
         amortized.samples_unit, amortized.marginals, space, *trial_arrays(result, len(space.names)),
-        (result.extra.get("noise_floor") or {}).get("pairwise") or [], post_start.box, method="box", seed=0,
+        (result.noise.floor or {}).get("pairwise") or [], post_start.box, method="box", seed=0,
     )
     return {
-        "posterior": _posterior_row(result.extra["posterior"], target.truth),
-        "posterior_kind": result.extra["posterior_source"]["kind"],
+        "posterior": _posterior_row(result.target_posterior.marginals, target.truth),
+        "posterior_kind": result.target_posterior.source["kind"],
         "posterior_amortized": _posterior_row(amortized.marginals, target.truth),
         "posterior_box": _posterior_row(box.marginals, target.truth) if box else None,
     }

@@ -170,11 +170,12 @@ def run(args: argparse.Namespace) -> dict:
                     seed=0, out=work / f"run_{video.stem}_{label}", progress=False, noise_samples=0,
                     floor_samples=0, scene_set=scene, device="cpu", conditioning=Conditioning(),
                 )  # fmt: skip
+                posterior = result.target_posterior
                 row[label] = {
                     "wind": result.best_params["wind_speed"],
                     "wind_error": abs(result.best_params["wind_speed"] - wind),
-                    "posterior_note": result.extra.get("posterior_note"),
-                    "posterior_used": "posterior" in result.extra,
+                    "posterior_note": posterior.note if posterior is not None else None,
+                    "posterior_used": posterior is not None and posterior.marginals is not None,
                     "seconds": time.perf_counter() - t1,
                 }
             targets.append(row)

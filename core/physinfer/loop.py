@@ -28,7 +28,7 @@ import numpy as np
 from physinfer.errors import UserInputError
 from physinfer.evaluation import evaluate_batch
 from physinfer.moved import moved_names
-from physinfer.refinement import RefineResult
+from physinfer.refinement import FitPlace, NoiseReport, RefineResult
 from physinfer.resimulation import final_noise_floor, observation_noise, select_best
 from physinfer.roles import Optimizer, Target, Trial
 from physinfer.rundir import RESUME_KEYS, TrialRecord, embedding_fingerprint
@@ -144,12 +144,11 @@ def _run_refinement(
         selection = select_best(records, pipeline, target, target_embedding, run_dir, config, embed_clips)
     chosen = None if selection is None else selection["chosen_step"]
     result = summarise(records, space.names, target, run_dir.path, time.perf_counter() - start, chosen_step=chosen)
-    result.extra["observation_sem"] = sem
-    _report_place(result, pipeline)
+    result.place = _fit_place(result.best_params, pipeline)
     if selection is not None:
-        result.extra["selection"] = {k: v for k, v in selection.items() if k != "key"}
-    if config.floor_samples:
-        result.extra["noise_floor"] = final_noise_floor(result, pipeline, target, target_embedding, config)
+        result.selection = {k: v for k, v in selection.items() if k != "key"}
+    floor = final_noise_floor(result, pipeline, target, target_embedding, config) if config.floor_samples else None
+    result.noise = NoiseReport(observation_sem=sem, floor=floor)
     return result
 
 
@@ -189,16 +188,16 @@ def _step(
     ]
 
 
-def _report_place(result: RefineResult, pipeline: Pipeline) -> None:
-    """Add where the best fit lies: its nuisance values (reported apart from the physics) and
+def _fit_place(best_params: dict[str, float], pipeline: Pipeline) -> FitPlace:
+    """Where the best fit lies: its nuisance values (reported apart from the physics) and
     the parameters at a bound of their range."""
     space = pipeline.simulator.parameter_space
-    nuisance = [name for name in getattr(pipeline.phenomenon, "nuisance", ()) if name in result.best_params]
-    if nuisance:  # reported apart; a bound of a nuisance (a phase of 0 or 1 cycle) says nothing
-        result.extra["nuisance"] = {name: result.best_params[name] for name in nuisance}
-    result.extra["at_bounds"] = {
-        name: bound for name, bound in space.at_bounds(result.best_params).items() if name not in nuisance
-    }
+    nuisance = [name for name in getattr(pipeline.phenomenon, "nuisance", ()) if name in best_params]
+    # Reported apart; a bound of a nuisance (a phase of 0 or 1 cycle) says nothing.
+    return FitPlace(
+        at_bounds={name: bound for name, bound in space.at_bounds(best_params).items() if name not in nuisance},
+        nuisance={name: best_params[name] for name in nuisance},
+    )
 
 
 def summarise(

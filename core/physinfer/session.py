@@ -34,7 +34,7 @@ from physinfer.moved import moved_names
 from physinfer.pipeline import fixed_by_user, full_parameter_space, target_duration
 from physinfer.plotting import plot_refinement  # imports matplotlib when it draws
 from physinfer.posterior.refined import posterior_start, report_posterior
-from physinfer.refinement import RefineResult
+from physinfer.refinement import RefineResult, TargetPosterior, TargetReport
 from physinfer.registry import Registry
 from physinfer.report import write_report_quietly
 from physinfer.roles import Optimizer, Target
@@ -325,27 +325,19 @@ def _report_beside(
     """Add to ``result`` what the refine command reports beside the best fit: its adequacy,
     the held values, the scene, the target's conditioning, the video's estimate, the executor,
     and the posterior (or why there is none)."""
-    extra, target = result.extra, setup.target
+    target = setup.target
     if np.isfinite(result.best_distance):  # the refine command's verdict (diagnose has its own tests)
-        extra["adequacy"] = assess_fit(
-            setup.pipeline, result.best_params, result.best_distance, target, extra.get("noise_floor"), seed
-        )
-    if setup.fixed_values:
-        extra["fixed"] = setup.fixed_values
-    if setup.scene is not None:
-        extra["scene"] = setup.scene
-    if target.conditions:
-        extra["target_conditions"] = target.conditions
-    if start.video_estimate is not None:
-        extra["video_estimate"] = start.video_estimate
-    if executor is not None:
-        extra["executor"] = executor
+        floor = result.noise.floor if result.noise is not None else None
+        result.adequacy = assess_fit(setup.pipeline, result.best_params, result.best_distance, target, floor, seed)
+    result.fixed = setup.fixed_values
+    result.target = TargetReport(setup.scene, target.conditions, start.video_estimate)
+    result.executor = executor
     amortized, note = posterior
     if amortized is not None:
         space = setup.pipeline.simulator.parameter_space
         report_posterior(result, amortized, space, start.posterior_start, run_dir.path, seed=seed)
     elif note:
-        extra["posterior_note"] = note
+        result.target_posterior = TargetPosterior(note=note)
 
 
 def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_dir: RunDirectory, seed: int) -> None:
@@ -356,11 +348,8 @@ def write_outputs(result: RefineResult, pipeline: Pipeline, target: Target, run_
     best_traj.save(run_dir.path / "best_trajectory.npz")
     best_clip = pipeline.renderer.render(best_traj, target.render_params)
     write_video(run_dir.path / "side_by_side.mp4", side_by_side([target.clip, best_clip]))
-    plot_refinement(
-        result.trials, result.ground_truth, run_dir.path / "refinement.png", bands=result.extra.get("posterior")
-    )
-    result.extra.setdefault("outputs", {})
-    result.extra["outputs"] = {
+    plot_refinement(result.trials, result.ground_truth, run_dir.path / "refinement.png", bands=result.posterior or None)
+    result.outputs = {
         name: str(run_dir.path / name)
         for name in ("result.json", "trials.jsonl", "refinement.png", "side_by_side.mp4", "best_trajectory.npz")
     }

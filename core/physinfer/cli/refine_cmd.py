@@ -4,7 +4,7 @@ without ``--json`` (the parameters, their intervals and labels, the noise-floor 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -33,6 +33,9 @@ from physinfer.cli.options import (
 )
 from physinfer.console import err_console
 from physinfer.scene import scene_text
+
+if TYPE_CHECKING:
+    from physinfer.refinement import RefineResult
 
 #: Above this gap / noise-floor ratio the human-readable refine output suggests more search.
 NOISE_RATIO_HINT = 1.5
@@ -171,16 +174,17 @@ def refine_cmd(
         err_console.print(line, highlight=False)
 
 
-def refine_result_lines(result: Any) -> list[str]:
+def refine_result_lines(result: RefineResult) -> list[str]:
     """What ``refine`` prints (without ``--json``): the parameters the video determines with
     best fit, posterior median, 90 % interval and label; the others named on one line (their
     best fit is where the search stopped, and a bound it stopped on says nothing either);
     correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
-    marginals = result.extra.get("posterior") or {}
+    marginals = result.posterior
     hidden = [
         n for n in result.best_params if marginals.get(n, {}).get("label") == "not identified"
     ]
-    at_bounds = {n: b for n, b in result.extra.get("at_bounds", {}).items() if n not in hidden}
+    place = result.place.at_bounds if result.place is not None else {}
+    at_bounds = {n: b for n, b in place.items() if n not in hidden}
     return [
         *_fit_lines(result),
         *_parameter_lines(result, marginals, hidden, at_bounds),
@@ -189,13 +193,13 @@ def refine_result_lines(result: Any) -> list[str]:
     ]
 
 
-def _fit_lines(result: Any) -> list[str]:
+def _fit_lines(result: RefineResult) -> list[str]:
     """The best distance, whether the best fit reproduces the video, the scene."""
     # Imported here: adequacy loads the footage modules (~15 % more start-up for --help).
     from physinfer.adequacy import verdict_line
 
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
-    adequacy = result.extra.get("adequacy")
+    adequacy = result.adequacy
     if (verdict := verdict_line(adequacy)) is not None:
         lines.append(verdict)
     elif adequacy and adequacy.get("reproduces"):
@@ -203,17 +207,17 @@ def _fit_lines(result: Any) -> list[str]:
             f"  the best fit reproduces the video ({adequacy['statistic']:.3g} times the scale of agreement, "
             f"≤ {adequacy['threshold']:g})"
         )
-    if result.extra.get("scene"):
-        lines.append(f"  scene: {scene_text(result.extra['scene'])}")
+    if result.target is not None and result.target.scene:
+        lines.append(f"  scene: {scene_text(result.target.scene)}")
     return lines
 
 
 def _parameter_lines(
-    result: Any, marginals: dict, hidden: list[str], at_bounds: dict[str, str]
+    result: RefineResult, marginals: dict, hidden: list[str], at_bounds: dict[str, str]
 ) -> list[str]:
     """A line per parameter the video determines, then the nuisance values on one line and the
     parameters not identified on another."""
-    nuisance = result.extra.get("nuisance") or {}
+    nuisance = result.place.nuisance if result.place is not None else {}
     lines = [
         best_fit_line(name, value, result, marginals.get(name), at_bounds.get(name))
         for name, value in result.best_params.items()
@@ -238,33 +242,37 @@ def _parameter_lines(
     return lines
 
 
-def _note_lines(result: Any, at_bounds: dict[str, str]) -> list[str]:
+def _note_lines(result: RefineResult, at_bounds: dict[str, str]) -> list[str]:
     """Correlations, where the posterior came from, fixed values, bounds, the noise-floor hint."""
-    lines = [
-        f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}"
-        for pair in (result.extra.get("correlations") or [])[:2]
-    ]
-    if result.extra.get("posterior_note"):
-        lines.append(result.extra["posterior_note"])
-    if result.extra.get("posterior_source"):
-        lines.append(posterior_source_line(result.extra["posterior_source"]))
-    for name, value in result.extra.get("fixed", {}).items():
+    lines: list[str] = []
+    if (posterior := result.target_posterior) is not None:
+        lines += [
+            f"  correlated: {pair['a']} ~ {pair['b']}  r = {pair['r']:+.2f}"
+            for pair in (posterior.correlations or [])[:2]
+        ]
+        if posterior.note:
+            lines.append(posterior.note)
+        if posterior.source:
+            lines.append(posterior_source_line(posterior.source))
+    for name, value in (result.fixed or {}).items():
         lines.append(f"  {name} = {value:.4g}   (fixed)")
-    for note in ((result.extra.get("video_estimate") or {}).get("outside_range") or {}).values():
+    video_estimate = result.target.video_estimate if result.target is not None else None
+    for note in ((video_estimate or {}).get("outside_range") or {}).values():
         lines.append(f"at the bound: {note}")
     if at_bounds:
         lines.append(
             f"{', '.join(at_bounds)} ended on a bound of the search range: the truth may lie beyond it, "
             "or another parameter is compensating for something the model lacks (`physinfer diagnose`)."
         )
-    hint = noise_ratio_hint((result.extra.get("noise_floor") or {}).get("ratio"))
+    floor = result.noise.floor if result.noise is not None else None
+    hint = noise_ratio_hint((floor or {}).get("ratio"))
     if hint:
         lines.append(hint)
     return lines
 
 
 def best_fit_line(
-    name: str, value: float, result: Any, marginal: dict | None, bound: str | None
+    name: str, value: float, result: RefineResult, marginal: dict | None, bound: str | None
 ) -> str:
     """One printed parameter: the best fit and, with a posterior, its 90 % interval and label.
 

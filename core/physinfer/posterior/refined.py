@@ -41,6 +41,7 @@ import numpy as np
 from physinfer.io import atomic_save_npz
 from physinfer.parameters import ParameterSpace
 from physinfer.posterior.summary import correlations, marginals
+from physinfer.refinement import RefineResult, TargetPosterior
 
 #: Labels whose parameters the likelihood is modelled over.
 INFORMED = ("identified", "weakly identified")
@@ -272,7 +273,7 @@ def trial_arrays(result: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def report_posterior(
-    result: Any,
+    result: RefineResult,
     amortized: Any,
     space: ParameterSpace,
     start: PosteriorStart | None,
@@ -281,7 +282,8 @@ def report_posterior(
     seed: int = 0,
     method: str = "product",
 ) -> None:
-    """Put the target's posterior into ``result.extra`` and its samples into the run directory.
+    """Set the target's posterior (``result.target_posterior``) and write its samples into the
+    run directory.
 
     ``posterior`` is the refined posterior when the trials give one, else the amortized one
     (``posterior_source`` says which, and why not refined); ``posterior_amortized`` is always
@@ -289,8 +291,9 @@ def report_posterior(
     not start from this posterior (``refine --model``).
     """
     trials_x, trials_d = trial_arrays(result, len(space.names))
-    floor = (result.extra.get("noise_floor") or {}).get("pairwise") or []
-    codec = (result.extra.get("adequacy") or {}).get("codec_distances") or []
+    noise = (result.noise.floor if result.noise is not None else None) or {}
+    floor = noise.get("pairwise") or []
+    codec = (result.adequacy or {}).get("codec_distances") or []
     if len(codec) >= 2 and floor and not any(floor):  # measured, and all zero
         # A deterministic phenomenon re-simulates to the same clip (floor 0): two versions of one
         # video then differ by what a camera does to it (the verdict's round trips).
@@ -299,7 +302,7 @@ def report_posterior(
     box = start.box if start is not None else (-np.ones(len(space.names)), np.ones(len(space.names)))
     refined, note = refine_posterior(
         amortized.samples_unit, amortized.marginals, space, trials_x, trials_d, floor, box,
-        method=method, seed=seed, noise_ratio=(result.extra.get("noise_floor") or {}).get("ratio"),
+        method=method, seed=seed, noise_ratio=noise.get("ratio"),
     )  # fmt: skip
     source: dict[str, Any] = {"kind": "amortized", "estimator": str(amortized.estimator)}
     chosen_marginals, chosen_corr = amortized.marginals, amortized.correlations
@@ -315,8 +318,5 @@ def report_posterior(
         source["not_refined"] = note
     if start is not None:
         source["search_box"] = start.box_physical
-    result.extra["posterior"] = chosen_marginals
-    result.extra["correlations"] = chosen_corr
-    result.extra["posterior_amortized"] = amortized.marginals
-    result.extra["posterior_source"] = source
+    result.target_posterior = TargetPosterior(chosen_marginals, chosen_corr, amortized.marginals, source)
     atomic_save_npz(Path(run_dir) / SAMPLES_FILE, **arrays)
