@@ -26,7 +26,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from physinfer.api.footage import PreparedVideo, Rendering, prepare, render
 from physinfer.api.options import (
@@ -61,6 +61,11 @@ from physinfer.scene import scene_of
 from physinfer.session import run as run_refine
 from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
 from physinfer.video import write_video
+
+if TYPE_CHECKING:  # their modules import torch and sbi: imported when the function runs
+    from physinfer.posterior.calibrate_workflow import CalibrationReport
+    from physinfer.posterior.infer_workflow import PosteriorReport
+    from physinfer.posterior.train_workflow import TrainResult
 
 __all__ = [
     "CalibrationOptions",
@@ -297,7 +302,7 @@ def diagnose(
     return Diagnosis.from_report(report, out)
 
 
-def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> Any:
+def infer(plugin: str, options: InferOptions | None = None, **settings: Any) -> PosteriorReport:
     """The posterior of one video from an amortized estimator, in seconds (``physinfer infer``).
 
     Args:
@@ -352,7 +357,7 @@ def train_posterior(
     *,
     progress: StagedProgress = False,
     **settings: Any,
-) -> Any:
+) -> TrainResult:
     """Train an amortized posterior q(θ | s(x)) on a dataset (``physinfer posterior train``).
 
     The dataset's clips are embedded once (cached beside it) and sbi's NPE is trained on the
@@ -399,7 +404,7 @@ def evaluate_calibration(
     *,
     progress: StagedProgress = False,
     **settings: Any,
-) -> Any:
+) -> CalibrationReport:
     """Simulation-based calibration of a posterior estimator on held-out simulations
     (``physinfer evaluate calibration``): rank histograms and the coverage of its 50 % and
     90 % intervals, per parameter.

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import functools
-from typing import Any
 
 from physinfer.plugins import load_registry
+from physinfer.registry import Registry
 
 
 @functools.cache
-def registry() -> Any:
+def registry() -> Registry:
     """The registry of every installed plugin, loaded once per process."""
     return load_registry()[0]
