@@ -40,6 +40,7 @@ def test_a_candidate_is_its_old_dict_key_for_key():
     # Read as the dict it was: indexing, get, in, ** and dict().
     assert cand["gap"] == cand.gap and cand.get("limit", {}) == {} and "limit" not in cand and "limit" in limited
     assert {**limited} == dict(limited) == limited.to_dict()
+    assert cand == cand.to_dict() and cand != limited and limited == json.loads(json.dumps(limited.to_dict()))
     with pytest.raises(KeyError):
         cand["limit"]
     with pytest.raises(dataclasses.FrozenInstanceError):

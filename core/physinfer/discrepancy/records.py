@@ -7,8 +7,9 @@ a :class:`Candidate`'s and a :class:`Screened`'s are ``diagnosis.json``'s ``cand
 ``screened`` entries key for key, in the same order.
 
 Each record also reads as its dict (``candidate["gap"]`` is ``candidate.gap``; ``get``, ``in``,
-``keys`` and ``{**candidate}`` work too): code written when these were dicts keeps working, and
-the rules that read a candidate (:func:`~physinfer.discrepancy.decide.name_effect`,
+``keys``, ``{**candidate}`` and ``==`` against a dict work too): code written when these were
+dicts keeps working (only ``json.dumps`` wants ``to_dict()``), and the rules that read a
+candidate (:func:`~physinfer.discrepancy.decide.name_effect`,
 :func:`~physinfer.discrepancy.unnamed.closest_unnamed`, ...) accept either.
 """
 
@@ -21,7 +22,8 @@ from typing import Any
 
 
 class _ReadsAsDict(Mapping[str, Any]):
-    """The read-only dict view of a record: its ``to_dict()``."""
+    """The read-only dict view of a record: its ``to_dict()``. A record equals another record
+    or a dict with the same ``to_dict()``, as the dicts it replaces did."""
 
     def to_dict(self) -> dict[str, Any]:  # pragma: no cover - each record defines it
         raise NotImplementedError
@@ -35,8 +37,15 @@ class _ReadsAsDict(Mapping[str, Any]):
     def __len__(self) -> int:
         return len(self.to_dict())
 
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, _ReadsAsDict):
+            return type(self) is type(other) and self.to_dict() == other.to_dict()
+        return self.to_dict() == dict(other) if isinstance(other, Mapping) else NotImplemented
 
-@dataclass(frozen=True, eq=True)
+    __hash__ = None  # type: ignore[assignment]  # as a dict's: the records hold dicts
+
+
+@dataclass(frozen=True, eq=False)
 class Candidate(_ReadsAsDict):
     """One candidate effect's refined model and whether its improvement counts.
 
@@ -117,7 +126,7 @@ class Candidate(_ReadsAsDict):
         return dataclasses.replace(self, detectable_from=detectable_from, limit=limit)
 
 
-@dataclass(frozen=True, eq=True)
+@dataclass(frozen=True, eq=False)
 class Screened(_ReadsAsDict):
     """A candidate left out before refinement: no fit could name it on this target
     (:mod:`physinfer.discrepancy.screen`).
@@ -144,7 +153,7 @@ class Screened(_ReadsAsDict):
         return cls(record["effect"], record["description"], record["reason"], record["rungs"])
 
 
-@dataclass(frozen=True, eq=True)
+@dataclass(frozen=True, eq=False)
 class Verdict(_ReadsAsDict):
     """The decision: is the model misspecified, by which test, and which effect it lacks.
 
