@@ -119,6 +119,17 @@ def verdict_line(adequacy: dict[str, Any] | None) -> str | None:
     )
 
 
+def agreement_line(adequacy: dict[str, Any] | None) -> str | None:
+    """The printed sentence when the fit (or the posterior's median) reproduces the target;
+    ``None`` otherwise (:func:`verdict_line` speaks then)."""
+    if not adequacy or not adequacy.get("reproduces"):
+        return None
+    return (
+        f"  the {adequacy.get('at', 'best fit')} reproduces the video ({adequacy['statistic']:.3g} times "
+        f"the scale of agreement, ≤ {adequacy['threshold']:g})"
+    )
+
+
 def predictive_check(pipeline: Pipeline, params: dict[str, float], target: Target, seed: int) -> dict[str, Any]:
     """The verdict on an amortized posterior (``infer``): simulate its median twice (under two
     seeds: their distance is the noise floor of a stochastic phenomenon), and compare their

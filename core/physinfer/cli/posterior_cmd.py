@@ -268,9 +268,9 @@ def infer_cmd(
     err_console.print(
         f"[bold]posterior[/] ({escape(report.estimator.name)}, {len(report.samples_unit)} samples)"
     )
-    from physinfer.adequacy import verdict_line
+    from physinfer.adequacy import agreement_line, verdict_line
 
-    if (verdict := verdict_line(report.adequacy)) is not None:
+    if (verdict := verdict_line(report.adequacy) or agreement_line(report.adequacy)) is not None:
         err_console.print(verdict, markup=False, highlight=False)
     for line in trust_lines(report):
         err_console.print(line, markup=False, highlight=False)

@@ -196,17 +196,11 @@ def refine_result_lines(result: RefineResult) -> list[str]:
 def _fit_lines(result: RefineResult) -> list[str]:
     """The best distance, whether the best fit reproduces the video, the scene."""
     # Imported here: adequacy loads the footage modules (~15 % more start-up for --help).
-    from physinfer.adequacy import verdict_line
+    from physinfer.adequacy import agreement_line, verdict_line
 
     lines = [f"best distance {result.best_distance:.4g} at step {result.best_step}"]
-    adequacy = result.adequacy
-    if (verdict := verdict_line(adequacy)) is not None:
+    if (verdict := verdict_line(result.adequacy) or agreement_line(result.adequacy)) is not None:
         lines.append(verdict)
-    elif adequacy and adequacy.get("reproduces"):
-        lines.append(
-            f"  the best fit reproduces the video ({adequacy['statistic']:.3g} times the scale of agreement, "
-            f"≤ {adequacy['threshold']:g})"
-        )
     if result.target is not None and result.target.scene:
         lines.append(f"  scene: {scene_text(result.target.scene)}")
     return lines
