@@ -103,6 +103,23 @@ def test_an_input_far_outside_the_training_inputs_is_reported_as_extrapolated():
     assert far["outside"] == 5 and far["extrapolating"] and far["worst_sd"] > 30
 
 
+def test_one_input_hundreds_of_sds_away_is_extrapolated_though_few_dimensions_are_outside():
+    # A video of another phenomenon lands a few of its 196 inputs 192-1396 training SDs away
+    # (measured): under the 20 % share, far beyond any in-model target (< 45).
+    from physinfer.posterior.inputs import MAX_WORST_SD
+
+    rng = np.random.default_rng(3)
+    estimator = _estimator(rng.normal(size=(500, 20)))
+    typical = np.zeros(20, dtype=np.float32)
+    typical[0] = 40.0  # one wild dimension of an in-model target as given
+    _, inside = estimator.input_check(typical)
+    assert inside["outside"] == 1 and not inside["extrapolating"]
+    unlike = np.zeros(20, dtype=np.float32)
+    unlike[0] = 2.0 * MAX_WORST_SD
+    _, far = estimator.input_check(unlike)
+    assert far["outside"] == 1 and far["worst_sd"] > MAX_WORST_SD and far["extrapolating"]
+
+
 def test_an_estimator_without_input_statistics_is_used_as_before():
     estimator = _estimator(np.random.default_rng(2).normal(size=(100, 3)))
     old = PosteriorEstimator(replace(estimator.config, inputs=None), _Echo())
