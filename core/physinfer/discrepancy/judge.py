@@ -60,7 +60,7 @@ def _candidate(stage: Stage, before: Stage, gap_before: float, scale: float, rul
         **decision,
         best_params=stage.result.best_params,
         effect_params={k: stage.result.best_params[k] for k in effect.parameter_space.names},
-        at_bounds=stage.result.extra.get("at_bounds", {}),
+        at_bounds=stage.result.place.at_bounds if stage.result.place is not None else {},
         distances=tuple(stage.gap.to_target or []),
         floor=stage.gap.floor,
         run_dir=stage.result.run_dir,
