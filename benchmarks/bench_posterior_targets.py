@@ -154,6 +154,7 @@ def infer_row(
     return {
         "params": params,
         "extrapolating": bool((report.inputs or {}).get("extrapolating")),
+        "worst_sd": (report.inputs or {}).get("worst_sd"),  # the input check's farthest dimension
         "estimator": Path(report.estimator).name,
         "seconds_after_start_up": time.perf_counter() - t0 - report.seconds.get("start_up", 0.0),
         "seconds": time.perf_counter() - t0,
@@ -183,6 +184,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                            wind_median_width90=wind["median_width90"])
         summary.update(
             extrapolating=int(sum(r["extrapolating"] for r in rs)),
+            max_worst_sd=max((r["worst_sd"] for r in rs if r.get("worst_sd") is not None), default=None),
             median_seconds_after_start_up=round(float(np.median([r["seconds_after_start_up"] for r in rs])), 2),
             refused=sum(1 for r in rows if r["condition"] == condition and "refused" in r),
         )
