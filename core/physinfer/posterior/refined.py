@@ -177,29 +177,9 @@ def refine_posterior(
         raise ValueError(f"method {method!r}: one of {METHODS}")
     dims = informed_dims(amortized_marginals, space.names)
     floor = np.asarray([d for d in floor_pairwise if np.isfinite(d) and d > 0], dtype=float)
-    if not dims:
-        return (
-            None,
-            "the video determines no parameter (amortized posterior), so trials cannot sharpen it",
-        )
-    if len(floor_pairwise) < 2:
-        return None, "the noise floor was not measured (--floor-samples ≥ 3 gives one)"
-    if len(floor) < 2:
-        return None, (
-            "re-simulations of one θ are identical (a deterministic phenomenon): the distance has no "
-            "noise scale to turn into a likelihood"
-        )
-    if len(trials_d) < MIN_TRIALS:
-        return (
-            None,
-            f"{len(trials_d)} successful trials; a refined posterior needs at least {MIN_TRIALS}",
-        )
-    if noise_ratio is not None and noise_ratio > MISFIT_RATIO:
-        return None, (
-            f"no fit reproduces the video within the noise floor (noise ratio {noise_ratio:.1f} > "
-            f"{MISFIT_RATIO:g}): the model misses something the video shows, so the trials' distances "
-            "carry no likelihood at the floor's scale (`physinfer diagnose` looks for what it misses)"
-        )
+    reason = _why_not_refined(dims, len(floor_pairwise), len(floor), len(trials_d), noise_ratio)
+    if reason is not None:
+        return None, reason
     log_eps = float(np.log(np.quantile(floor, 0.95)))
     gp = likelihood_model(np.asarray(trials_x)[:, dims], np.asarray(trials_d, dtype=float), seed)
     rng = np.random.default_rng(seed)
@@ -230,6 +210,30 @@ def refine_posterior(
         ),
         None,
     )
+
+
+def _why_not_refined(
+    dims: list[int], n_floor: int, n_positive_floor: int, n_trials: int, noise_ratio: float | None
+) -> str | None:
+    """Why the trials cannot refine the amortized posterior, or ``None`` when they can."""
+    if not dims:
+        return "the video determines no parameter (amortized posterior), so trials cannot sharpen it"
+    if n_floor < 2:
+        return "the noise floor was not measured (--floor-samples ≥ 3 gives one)"
+    if n_positive_floor < 2:
+        return (
+            "re-simulations of one θ are identical (a deterministic phenomenon): the distance has no "
+            "noise scale to turn into a likelihood"
+        )
+    if n_trials < MIN_TRIALS:
+        return f"{n_trials} successful trials; a refined posterior needs at least {MIN_TRIALS}"
+    if noise_ratio is not None and noise_ratio > MISFIT_RATIO:
+        return (
+            f"no fit reproduces the video within the noise floor (noise ratio {noise_ratio:.1f} > "
+            f"{MISFIT_RATIO:g}): the model misses something the video shows, so the trials' distances "
+            "carry no likelihood at the floor's scale (`physinfer diagnose` looks for what it misses)"
+        )
+    return None
 
 
 # ------------------------------------------------------------------ within a refinement
