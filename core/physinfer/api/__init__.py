@@ -379,7 +379,8 @@ def train_posterior(
     from physinfer.posterior.train_workflow import train_posterior as run
 
     o = with_settings(PosteriorTrainOptions, options, settings)
-    data = required(o.data, "data", "the dataset directory (physinfer dataset generate)")
+    if o.data is None:  # a directory, or several (--data A --data B): the workflow checks them
+        required(o.data, "data", "the dataset directory (physinfer dataset generate)")
     out = required(o.out, "out", "the estimator file to write (*.safetensors)")
     # Before the embedding and training (minutes to hours): the user's weights stay theirs.
     check_output_file(
@@ -390,7 +391,7 @@ def train_posterior(
     )
     with _staged_progress(progress) as report:
         return run(
-            registry(), plugin=plugin, data=data, out=out, embedder=o.embedder,
+            registry(), plugin=plugin, data=o.data, out=out, embedder=o.embedder,
             embedder_frames=o.embedder_frames, weights=_optional(o.weights), device=o.device,
             split=o.split, network=network, seed=o.seed, as_given=not o.stored,
             accept_miscalibrated=o.accept_miscalibrated, render_inputs=as_names(o.render_inputs, "render_inputs"),

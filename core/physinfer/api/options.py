@@ -257,7 +257,9 @@ class PosteriorTrainOptions:
     """``physinfer posterior train``.
 
     Attributes:
-        data: Dataset directory from ``physinfer dataset generate`` (θ stored with the clips).
+        data: Dataset directory from ``physinfer dataset generate`` (θ stored with the clips),
+            or several trained on together (generated alike: one phenomenon, clip format,
+            parameter space and scene; ``--data A --data B``).
         out: Estimator file to write (``*.safetensors``; its configuration is stored inside).
         overwrite: Replace ``out`` when it exists (by default an existing file is refused
             before anything is embedded or trained).
@@ -281,7 +283,7 @@ class PosteriorTrainOptions:
             intervals miss the truth too often or collapse), with the check recorded.
     """
 
-    data: Path | None = None
+    data: Path | tuple[Path, ...] | None = None
     out: Path | None = None
     overwrite: bool = False
     embedder: str | None = None

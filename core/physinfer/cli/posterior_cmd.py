@@ -49,7 +49,14 @@ def posterior_group() -> None:
 
 
 # The options only ``posterior train`` has, declared here so its signature reads as a list of settings.
-_DataOpt = Annotated[Path, typer.Option("--data", help="Dataset from `physinfer dataset generate`.")]
+_DataOpt = Annotated[
+    list[Path],
+    typer.Option(
+        "--data",
+        help="Dataset from `physinfer dataset generate` (repeatable: datasets generated alike, "
+        "trained on together).",
+    ),
+]
 _EstimatorOutOpt = Annotated[
     Path, typer.Option("--out", help="Estimator file to write (*.safetensors).")
 ]

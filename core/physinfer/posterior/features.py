@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -99,7 +99,7 @@ class EmbeddedSet:
         missing = sorted({name for name in ranges for zeta in self.render_params if name not in zeta})
         if len(self.render_params) != len(self) or missing:
             raise UserInputError(
-                f"the clips of {self.cache.parent.parent} do not record the render settings "
+                f"the clips of {_root(self)} do not record the render settings "
                 f"{', '.join(missing or sorted(ranges))} the estimator takes; use a dataset made by "
                 "`physinfer dataset generate`"
             )
@@ -111,6 +111,42 @@ class EmbeddedSet:
         return np.stack(
             [spec.from_unit(self.theta_unit[:, i]) for i, spec in enumerate(self.parameter_space)], axis=1
         )
+
+
+def join_sets(sets: Sequence[EmbeddedSet]) -> EmbeddedSet:
+    """The embedded clips of several datasets as one training set (``posterior train`` with
+    more than one ``--data``); its ``cache`` is the first set's.
+
+    The callers check that the datasets agree (phenomenon, clip format, parameter space,
+    scene); here the pairs' own terms are checked once more, as a mixed set would train
+    silently wrong.
+
+    Raises:
+        UserInputError: sets of different parameter spaces, scene ranges or target paths.
+    """
+    first = sets[0]
+    for other in sets[1:]:
+        if other.parameter_space.to_dict() != first.parameter_space.to_dict():
+            raise UserInputError(f"{_root(other)} draws θ from other parameters than {_root(first)}")
+        if other.scene_ranges != first.scene_ranges or other.as_given != first.as_given:
+            raise UserInputError(
+                f"{_root(other)} varies other scene settings or was embedded on another path than {_root(first)}"
+            )
+    if len(sets) == 1:
+        return first
+    return replace(
+        first,
+        theta_unit=np.concatenate([s.theta_unit for s in sets]),
+        x=np.concatenate([s.x for s in sets]),
+        sim_ids=np.concatenate([s.sim_ids for s in sets]),
+        context=np.concatenate([s.context for s in sets]),
+        render_params=tuple(zeta for s in sets for zeta in s.render_params),
+    )
+
+
+def _root(pairs: EmbeddedSet) -> Path:
+    """The dataset directory ``pairs`` were embedded from (its cache lies in ``embeddings/``)."""
+    return pairs.cache.parent.parent
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@ it) and train q(θ | s(x)) on the (θ, embedding) pairs; the result and where it
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -16,7 +17,7 @@ from physinfer.datasets.loader import ClipDataset
 from physinfer.errors import UserInputError
 from physinfer.io import check_output_dir
 from physinfer.posterior.estimator import NetworkConfig, PosteriorEstimator, resolve_device
-from physinfer.posterior.features import TargetPath, embed_dataset
+from physinfer.posterior.features import EmbeddedSet, TargetPath, embed_dataset, join_sets
 from physinfer.posterior.fingerprint import embedder_probe, probe_clip
 from physinfer.posterior.held_out import MAX_CLIPS, SAMPLES, held_out_check
 from physinfer.posterior.inputs import checked_rows, render_ranges, varied_render_settings
@@ -35,6 +36,8 @@ class TrainResult:
     path: Path
     cache: Path
     seconds: dict[str, float]
+    #: The cache of each dataset trained on (``cache`` is the first's).
+    caches: tuple[Path, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON ``physinfer posterior train --json`` prints."""
@@ -50,7 +53,8 @@ class TrainResult:
             "scene": c.scene,
             "scene_ranges": c.scene_ranges,
             "render_inputs": c.render_inputs,
-            "embeddings_cache": str(self.cache),
+            # one dataset: its cache; several: a list, one per dataset
+            "embeddings_cache": [str(c) for c in self.caches] if len(self.caches) > 1 else str(self.cache),
             "targets": c.targets,
             "constant_inputs": len((c.inputs or {}).get("constant", [])),
             "held_out": c.held_out,
@@ -78,7 +82,7 @@ def train_posterior(
     registry: Registry,
     *,
     plugin: str,
-    data: Path,
+    data: Path | Sequence[Path],
     out: Path,
     embedder: str | None = None,
     embedder_frames: int | None = None,
@@ -95,6 +99,10 @@ def train_posterior(
 ) -> TrainResult:
     """Embed a dataset's clips (cached beside it) and train q(θ | s(x)) with sbi's NPE.
 
+    ``data``: one dataset directory, or several trained on together (more clips than one
+    dataset holds, each dataset with its own cache): they must be of one phenomenon, clip
+    format, parameter space and scene.
+
     ``as_given``: embed the clips as users give videos (:mod:`physinfer.as_given`: camera
     effects, H.264, ``infer``'s conditioning), so that the estimator is trained on what it
     will be asked about; ``False``: the stored renders as they are.
@@ -110,7 +118,8 @@ def train_posterior(
     Neither: the estimator averages over the clips' ζ, as before.
 
     Raises:
-        UserInputError: a dataset of another phenomenon or without θ, clips shorter than
+        UserInputError: a dataset of another phenomenon or without θ, datasets that differ
+            in clip format, parameters or scene, clips shorter than
             the embedder reads, grayscale clips for an embedder that reads colour, too few
             clips, a render input the clips do not vary, or an estimator that fails the
             held-out check.
@@ -118,47 +127,46 @@ def train_posterior(
     network = network or NetworkConfig()
     network.validate()  # before the slow embedding
     out = _estimator_path(out)
-    dataset = ClipDataset(data, split)
-    check_dataset(dataset, plugin)
-    told = _told_ranges(dataset, render_inputs, told_camera)  # before the slow embedding
+    datasets = _checked_datasets(data, split, plugin)
+    dataset = datasets[0]
+    told = _told_ranges(datasets, render_inputs, told_camera)  # before the slow embedding
     pipeline = build_embedder(
         registry, plugin, embedder=embedder, embedder_frames=embedder_frames, weights=weights, device=device
     )
     emb = pipeline.embedder
     name = embedder or pipeline.phenomenon.default_embedder
-    clip_seconds = _checked_clip_seconds(dataset, data, emb, name)
+    clip_seconds = _checked_clip_seconds(dataset, dataset.root, emb, name)  # alike in all
     identity = _identity(plugin, name, emb, embedder_frames, weights, clip_seconds)
     t0 = time.perf_counter()
     path = TargetPath(pipeline.phenomenon, CameraModel(), seed) if as_given else None
     embedder_info = {k: identity[k] for k in ("embedder", "embedder_frames", "embedder_fps", "probe")}
-    pairs = embed_dataset(
-        data, split, emb, embedder_info, as_given=path,
-        on_progress=lambda done, total: progress("embedding", done, total),
-    ).with_render_inputs(told)  # fmt: skip
+    pairs, caches = _embedded(datasets, split, emb, embedder_info, path, progress)
+    pairs = pairs.with_render_inputs(told)
     t1 = time.perf_counter()
     estimator = train_estimator(
         pairs, identity, network=network, seed=seed, device=resolve_device(device),
         on_epoch=lambda done, total, best: progress("training", done, total),
     )  # fmt: skip
-    _record_dataset(estimator, dataset, data, split)
+    _record_dataset(estimator, datasets, split)
     t2 = time.perf_counter()
-    held_out = _check_held_out(estimator, data, split, emb, embedder_info, path, pipeline.phenomenon, progress)
+    roots = [d.root for d in datasets]
+    held_out = _check_held_out(estimator, roots, split, emb, embedder_info, path, pipeline.phenomenon, progress)
     estimator.config = replace(estimator.config, held_out=held_out)
     if held_out and held_out["problems"] and not accept_miscalibrated:
-        raise UserInputError(_refusal(held_out, data, as_given))
+        raise UserInputError(_refusal(held_out, ", ".join(map(str, roots)), as_given))
     t3 = time.perf_counter()
     estimator.save(out)
     pipeline.renderer.close()
-    return TrainResult(
-        estimator, out, pairs.cache, {"embed": t1 - t0, "train": t2 - t1, "held_out_check": t3 - t2}
-    )
+    seconds = {"embed": t1 - t0, "train": t2 - t1, "held_out_check": t3 - t2}
+    return TrainResult(estimator, out, caches[0], seconds, caches)
 
 
-def _told_ranges(dataset: Any, render_inputs: Sequence[str], told_camera: bool) -> dict[str, list[float]]:
+def _told_ranges(datasets: Sequence[Any], render_inputs: Sequence[str], told_camera: bool) -> dict[str, list[float]]:
     """``{name: [low, high]}`` of the render settings the estimator is told (``--render-input``,
     and with ``--told-camera`` every numeric one the training clips vary), over the training
-    clips' ζ; empty when none is told."""
-    zetas = dataset.render_params
+    clips' ζ of every dataset; empty when none is told."""
+    dataset = datasets[0]
+    zetas = [zeta for d in datasets for zeta in d.render_params]
     names = [*render_inputs, *(varied_render_settings(zetas) if told_camera else ())]
     if told_camera and not names:
         raise UserInputError(
@@ -167,6 +175,66 @@ def _told_ranges(dataset: Any, render_inputs: Sequence[str], told_camera: bool) 
             "a fixed --render-set)",
         )
     return render_ranges(names, zetas) if names else {}
+
+
+def _checked_datasets(data: Path | Sequence[Path], split: str, plugin: str) -> list[ClipDataset]:
+    """The ``split`` of each dataset ``data``, checked for ``plugin`` and against the first: one
+    estimator learns from clips of one format, parameter space and scene.
+
+    Raises:
+        UserInputError: no dataset, one of another phenomenon or without θ, or datasets that
+            differ (what differs is named).
+    """
+    given = list(data) if isinstance(data, tuple | list) else [data]
+    if not given:
+        raise UserInputError("data: give the dataset directory (physinfer dataset generate)")
+    for item in given:
+        if not isinstance(item, str | os.PathLike):
+            raise UserInputError(f"--data {item!r}: give a path")
+    roots = [Path(item) for item in given]
+    datasets = [ClipDataset(root, split) for root in roots]
+    for dataset in datasets:
+        check_dataset(dataset, plugin)
+    first = datasets[0]
+    for other in datasets[1:]:
+        differs = [what for what, key in _DATASET_TERMS.items() if key(other) != key(first)]
+        if differs:
+            raise UserInputError(
+                f"{other.root} differs from {first.root} in its {' and '.join(differs)}; "
+                "train on datasets generated alike (dataset generate with the same options but --seed)"
+            )
+    return datasets
+
+
+#: What datasets trained on together must share, and how each is read.
+_DATASET_TERMS: dict[str, Any] = {
+    "clip format": lambda d: d.clip_format,
+    "parameters": lambda d: d.parameter_space.to_dict(),
+    "scene": lambda d: d.info.get("config", {}).get("scene"),
+    "scene ranges": lambda d: d.scene_ranges,
+}
+
+
+def _embedded(
+    datasets: Sequence[ClipDataset],
+    split: str,
+    embedder: Any,
+    embedder_info: dict[str, Any],
+    path: TargetPath | None,
+    progress: ProgressFn,
+) -> tuple[EmbeddedSet, tuple[Path, ...]]:
+    """The embedded training clips of every dataset as one set (each cached beside its
+    dataset), and the cache files; one progress bar over all of them."""
+    total, before, sets = sum(len(d) for d in datasets), 0, []
+    for dataset in datasets:
+        sets.append(
+            embed_dataset(
+                dataset.root, split, embedder, embedder_info, as_given=path,
+                on_progress=lambda done, _, before=before: progress("embedding", before + done, total),
+            )
+        )  # fmt: skip
+        before += len(dataset)
+    return join_sets(sets), tuple(s.cache for s in sets)
 
 
 def _checked_clip_seconds(dataset: Any, data: Path, embedder: Any, name: str) -> float:
@@ -207,11 +275,12 @@ def _identity(
     }
 
 
-def _record_dataset(estimator: PosteriorEstimator, dataset: Any, data: Path, split: str) -> None:
-    """Note the dataset and split in the estimator's training record, and the clips' scene in
-    its config: targets of another scene get no intervals from it."""
-    estimator.config.training.update(dataset=str(Path(data).resolve().name), split=split)
-    scene = dataset.info.get("config", {}).get("scene")
+def _record_dataset(estimator: PosteriorEstimator, datasets: Sequence[Any], split: str) -> None:
+    """Note the dataset (a list of names for several) and split in the estimator's training
+    record, and the clips' scene in its config: targets of another scene get no intervals from it."""
+    names = [d.root.resolve().name for d in datasets]
+    estimator.config.training.update(dataset=names[0] if len(names) == 1 else names, split=split)
+    scene = datasets[0].info.get("config", {}).get("scene")
     if scene is not None:
         estimator.config = replace(estimator.config, scene=dict(scene))
 
@@ -242,7 +311,7 @@ def reads_colour(embedder: Any) -> bool:
 
 def _check_held_out(
     estimator: PosteriorEstimator,
-    data: Path,
+    roots: Sequence[Path],
     split: str,
     embedder: Any,
     embedder_info: dict[str, Any],
@@ -250,25 +319,37 @@ def _check_held_out(
     phenomenon: Any,
     progress: ProgressFn,
 ) -> dict[str, Any] | None:
-    """The held-out check on the dataset's ``test`` (else ``val``) split, or ``None`` when
-    it has no held-out clips."""
-    held = next((s for s in ("test", "val") if s != split and len(ClipDataset(data, s)) > 0), None)
-    if held is None:
+    """The held-out check on the datasets' ``test`` (else ``val``) splits, or ``None`` when
+    none has held-out clips."""
+    held = {root: _held_out_split(root, split) for root in roots}
+    sets = [
+        embed_dataset(
+            root, s, embedder, embedder_info, as_given=path,
+            on_progress=lambda done, total: progress("held-out clips", done, total),
+        )
+        for root, s in held.items()
+        if s is not None
+    ]  # fmt: skip
+    if not sets:
         return None
-    pairs = embed_dataset(
-        data, held, embedder, embedder_info, as_given=path,
-        on_progress=lambda done, total: progress("held-out clips", done, total),
-    ).with_render_inputs(estimator.config.render_inputs)  # fmt: skip
+    pairs = join_sets(sets).with_render_inputs(estimator.config.render_inputs)
     rows = slice(0, min(len(pairs), MAX_CLIPS))
     x = checked_rows(estimator.config.inputs, pairs.conditions[rows])
     samples = estimator.sample_unit_batched(x, SAMPLES, seed=0)
     names = estimator.parameter_space.names
     nuisance = getattr(phenomenon, "nuisance", ()) or ()
     check = held_out_check(pairs.theta_unit[rows].astype(np.float64), samples, names, nuisance)
-    return {"split": held, "as_given": path is not None, **check}
+    splits = sorted({s for s in held.values() if s is not None})
+    return {"split": splits[0] if len(splits) == 1 else splits, "as_given": path is not None, **check}
 
 
-def _refusal(held_out: dict[str, Any], data: Path, as_given: bool) -> str:
+def _held_out_split(root: Path, split: str) -> str | None:
+    """The split of ``root`` a training on ``split`` is checked on: ``test``, else ``val``
+    (``None`` without held-out clips)."""
+    return next((s for s in ("test", "val") if s != split and len(ClipDataset(root, s)) > 0), None)
+
+
+def _refusal(held_out: dict[str, Any], data: str, as_given: bool) -> str:
     """The refusal of an estimator that failed the held-out check, with what to change."""
     fixes = [
         "an ensemble of flows (--ensemble 5: their mixture is wider where they disagree)",
