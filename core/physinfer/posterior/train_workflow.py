@@ -118,11 +118,10 @@ def train_posterior(
     Neither: the estimator averages over the clips' ζ, as before.
 
     Raises:
-        UserInputError: a dataset of another phenomenon or without θ, datasets that differ
-            in clip format, parameters or scene, clips shorter than
-            the embedder reads, grayscale clips for an embedder that reads colour, too few
-            clips, a render input the clips do not vary, or an estimator that fails the
-            held-out check.
+        UserInputError: a dataset of another phenomenon or without θ, datasets that differ in
+            clip format, parameters or scene, clips shorter than the embedder reads, grayscale
+            clips for an embedder that reads colour, too few clips, a render input the clips do
+            not vary, or an estimator that fails the held-out check.
     """
     network = network or NetworkConfig()
     network.validate()  # before the slow embedding
