@@ -16,7 +16,9 @@ import torch
 # nflows' LU transform (inside sbi's spline flows) calls torch.triangular_solve, which torch
 # reports as deprecated on every first use: six lines of torch's internals printed above a
 # user's `physinfer infer` answer, about code neither they nor we can change.
-warnings.filterwarnings("ignore", message="torch.triangular_solve is deprecated", category=UserWarning)
+warnings.filterwarnings(
+    "ignore", message="torch.triangular_solve is deprecated", category=UserWarning
+)
 
 #: Normalised coordinates are kept this far inside ``±1`` before ``atanh``.
 EDGE = 1e-6
