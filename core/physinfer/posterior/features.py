@@ -115,27 +115,13 @@ class EmbeddedSet:
 
 def join_sets(sets: Sequence[EmbeddedSet]) -> EmbeddedSet:
     """The embedded clips of several datasets as one training set (``posterior train`` with
-    more than one ``--data``); its ``cache`` is the first set's.
-
-    The callers check that the datasets agree (phenomenon, clip format, parameter space,
-    scene); here the pairs' own terms are checked once more, as a mixed set would train
-    silently wrong.
-
-    Raises:
-        UserInputError: sets of different parameter spaces, scene ranges or target paths.
-    """
-    first = sets[0]
-    for other in sets[1:]:
-        if other.parameter_space.to_dict() != first.parameter_space.to_dict():
-            raise UserInputError(f"{_root(other)} draws θ from other parameters than {_root(first)}")
-        if other.scene_ranges != first.scene_ranges or other.as_given != first.as_given:
-            raise UserInputError(
-                f"{_root(other)} varies other scene settings or was embedded on another path than {_root(first)}"
-            )
+    more than one ``--data``); its ``cache`` is the first set's. The caller has checked that
+    the datasets agree (:func:`physinfer.posterior.train_workflow` refuses any that differ in
+    clip format, parameters or scene before embedding them)."""
     if len(sets) == 1:
-        return first
+        return sets[0]
     return replace(
-        first,
+        sets[0],
         theta_unit=np.concatenate([s.theta_unit for s in sets]),
         x=np.concatenate([s.x for s in sets]),
         sim_ids=np.concatenate([s.sim_ids for s in sets]),
