@@ -2,7 +2,8 @@
 
 Draws ``--targets`` θ uniformly in the normalised cube (seed ``300_000 + i``, ``i`` from ``--first``), simulates
 and renders each at the phenomenon's default ζ, writes it to mp4 as a user's video would
-arrive, refines it with ``physinfer refine`` defaults and records the adequacy statistic.
+arrive, refines it with ``physinfer refine`` defaults and records the adequacy statistic and the
+motion ratio (the best fit's motion energy over the target's).
 A target that the model made itself must be reproduced: every ``reproduces: false`` is a
 false alarm. Prints one JSON object: per target the statistic and verdict, the share of
 false alarms, and the statistic's quantiles (what a threshold would give).
@@ -62,7 +63,7 @@ def main() -> None:
         result = json.loads((run / "result.json").read_text())
         adequacy = result.get("adequacy") or {}
         rows.append({"target": i, "theta": theta, "best": result["best_params"], "statistic": adequacy.get("statistic"),
-                     "reproduces": adequacy.get("reproduces"), "wall_time_s": result.get("wall_time_s")})  # fmt: skip
+                     "motion_ratio": (adequacy.get("motion") or {}).get("ratio"), "reproduces": adequacy.get("reproduces"), "wall_time_s": result.get("wall_time_s")})  # fmt: skip
         print(json.dumps(rows[-1]), file=sys.stderr)
     renderer.close()
     stats = np.array([r["statistic"] for r in rows if r.get("statistic") is not None], dtype=float)
@@ -71,9 +72,16 @@ def main() -> None:
         "targets": len(rows),
         "false_alarms": sum(r.get("reproduces") is False for r in rows),
         "statistic_quantiles": {q: float(np.quantile(stats, q)) for q in (0.5, 0.9, 0.95, 1.0)} if len(stats) else None,
+        "motion_ratio_range": _range([r.get("motion_ratio") for r in rows]),
         "rows": rows,
     }
     print(json.dumps(summary, indent=2))
+
+
+def _range(values: list[float | None]) -> list[float] | None:
+    """``[min, max]`` of the measured values (the motion check's bounds are 0.25 and 4)."""
+    measured = [v for v in values if v is not None]
+    return [min(measured), max(measured)] if measured else None
 
 
 if __name__ == "__main__":

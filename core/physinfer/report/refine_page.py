@@ -50,8 +50,10 @@ def adequacy_section(adequacy: Mapping[str, Any]) -> str:
     if line is None and adequacy.get("reproduces"):
         line = (
             f"The best fit reproduces the video: {fmt(adequacy.get('statistic'))} times the scale of "
-            f"agreement (reproducing needs ≤ {fmt(adequacy.get('threshold'))})."
+            f"agreement (reproducing needs ≤ {fmt(adequacy.get('threshold'))})"
         )
+        motion = adequacy.get("motion")
+        line += f", moving {fmt(motion['ratio'])} times as much as the video." if motion else "."
     cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
     text = line or str(adequacy.get("note", "no verdict"))
     return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))
