@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from physinfer.adequacy import verdict_line
+from physinfer.adequacy import agreement_line, verdict_line
 from physinfer.report.common import Content, correlations, parameter_table, read_json, units_of
 from physinfer.report.markup import figure, fmt, key_values, paragraph, section, table, video
 
@@ -46,16 +46,9 @@ def refine_content(run: Path) -> Content:
 
 def adequacy_section(adequacy: Mapping[str, Any]) -> str:
     """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
-    line = verdict_line(adequacy)
-    if line is None and adequacy.get("reproduces"):
-        line = (
-            f"The best fit reproduces the video: {fmt(adequacy.get('statistic'))} times the scale of "
-            f"agreement (reproducing needs ≤ {fmt(adequacy.get('threshold'))})"
-        )
-        motion = adequacy.get("motion")
-        line += f", moving {fmt(motion['ratio'])} times as much as the video." if motion else "."
+    said = (verdict_line(dict(adequacy)) or agreement_line(dict(adequacy)) or "").strip()
+    text = said[:1].upper() + said[1:] if said else str(adequacy.get("note", "no verdict"))
     cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
-    text = line or str(adequacy.get("note", "no verdict"))
     return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))
 
 
