@@ -357,12 +357,13 @@ def write_video(
 
     ``lossless``: H.264 in RGB without loss (``libx264rgb``, quantiser 0; a 200-frame 112-px
     flag clip takes 1.5 MB against 71 kB): reading it back gives these frames exactly. ``crf``:
-    the lossy quality (18 near-transparent; phones write about 23-28). The same frames give
-    the same file in every process, which the adequacy verdict's camera round trip and clips
-    as given rely on (before, the statistic moved a few per cent from run to run): libx264
-    reads past the width of a frame that is not a multiple of 16 wide, where PyAV's frames
-    hold whatever the memory held (another stream on the first write in each process), so
-    the lossy path hands it frames whose rows are filled to the stride (:func:`yuv420p`).
+    the lossy quality (18 near-transparent; phones write about 23-28). The lossy path
+    encodes whole macroblocks, cropped in the stream's header, from frames converted in
+    numpy (:func:`yuv420p`), so that libx264 reads no byte PyAV leaves unset. The first
+    lossy write in a process can still give another stream for the same frames (libx264
+    reads uninitialised heap memory of its own: with glibc's mmap threshold fixed every
+    write tried was the same), so a video that is to be the same target every time it is
+    made (a benchmark's) is written lossless.
     """
     if isinstance(frames, Clip):
         frames, fps = frames.frames, frames.fps if fps is None else fps
@@ -391,45 +392,63 @@ def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = Fal
     pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
     if pad_h or pad_w:
         frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+    height, width = frames.shape[1:3]
+    # Lossy: encoded in whole 16-pixel macroblocks, the extra rows and columns cropped away in
+    # the stream's header (decoders show height × width); see yuv420p for why.
+    crop_h, crop_w = (0, 0) if lossless else (-height % 16, -width % 16)
     rate = Fraction(fps).limit_denominator(1001)
     with av.open(str(path), mode="w", format="mp4") as container:
         stream = container.add_stream("libx264rgb" if lossless else "libx264", rate=rate)
-        stream.width, stream.height = frames.shape[2], frames.shape[1]
+        stream.width, stream.height = width + crop_w, height + crop_h
         stream.pix_fmt = "rgb24" if lossless else "yuv420p"
-        stream.options = {"qp": "0", "preset": "veryfast"} if lossless else {"crf": str(int(crf)), "preset": "veryfast"}
+        stream.options = (
+            {"qp": "0", "preset": "veryfast"}
+            if lossless
+            else {"crf": str(int(crf)), "preset": "veryfast", "x264-params": f"crop-rect=0,0,{crop_w},{crop_h}"}
+        )
         for fr in frames:
-            frame = av.VideoFrame.from_ndarray(fr, format="rgb24") if lossless else yuv420p(fr)
+            if lossless:
+                frame = av.VideoFrame.from_ndarray(fr, format="rgb24")
+            else:
+                frame = yuv420p(np.pad(fr, ((0, crop_h), (0, crop_w), (0, 0)), mode="edge"))
             for packet in stream.encode(frame):
                 container.mux(packet)
         for packet in stream.encode():
             container.mux(packet)
 
 
-#: RGB to Y'CbCr, ITU-R BT.601 in limited range (16-235, 16-240): what decoders assume of a
-#: stream that does not say, and what PyAV's conversion wrote before.
-_BT601 = np.array(
-    [[65.481, 128.553, 24.966], [-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]], np.float32
-) / 255.0
-_BT601_OFFSET = np.array([16.0, 128.0, 128.0], np.float32)
+#: RGB to Y', Cb, Cr: ITU-R BT.601 in limited range (Y' 16-235, chroma 16-240, so no clipping
+#: is needed), what decoders assume of a stream that does not say and what PyAV's conversion
+#: wrote before; 0.5 is added so that truncation rounds.
+_LUMA = np.array([65.481, 128.553, 24.966], np.float32) / 255
+_CHROMA = np.array([[-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]], np.float32).T / 255
+_LUMA_OFFSET, _CHROMA_OFFSET = 16.5, 128.5
+#: Zero bytes after the last plane handed to libx264, which reads past the end of a frame.
+_TAIL = 4096
 
 
 def yuv420p(rgb: np.ndarray) -> Any:
-    """An ``(H, W, 3)`` uint8 RGB frame (even H and W) as a yuv420p ``av.VideoFrame``:
-    BT.601 limited range, each chroma sample the mean of its 2×2 block, each row filled to
-    its plane's stride with its last pixel (libx264 reads past the width of a frame whose
-    width is not a multiple of 16: bytes left unset there made another stream each run).
-    numpy, so the same pixels give the same frame in every process."""
+    """An ``(H, W, 3)`` uint8 RGB frame (H and W multiples of 16) as a yuv420p
+    ``av.VideoFrame`` over a numpy buffer with zeros after its planes: BT.601 limited range,
+    each chroma sample from the mean colour of its 2×2 block.
+
+    Why not PyAV's own frames: libx264 reads bytes they leave unset (past a width that is not
+    a multiple of 16, below the last row, after the last plane), so the first write of the
+    same noisy frames in each process made another stream (the ball on a string, 550 × 310;
+    tests/core/test_video.py). Not every such difference is gone (:func:`write_video`)."""
     import av
 
     height, width = rgb.shape[:2]
-    ycc = rgb.astype(np.float32) @ _BT601.T + _BT601_OFFSET
-    chroma = ycc[..., 1:].reshape(height // 2, 2, width // 2, 2, 2).mean(axis=(1, 3))
-    frame = av.VideoFrame(width, height, "yuv420p")
-    for plane, values in zip(frame.planes, (ycc[..., 0], chroma[..., 0], chroma[..., 1]), strict=True):
-        pixels = np.clip(np.rint(values), 0, 255).astype(np.uint8)
-        padded = np.pad(pixels, ((0, 0), (0, plane.line_size - pixels.shape[1])), mode="edge")
-        plane.update(np.ascontiguousarray(padded))
-    return frame
+    full = rgb.astype(np.float32)
+    block = (full[0::2, 0::2] + full[0::2, 1::2] + full[1::2, 0::2] + full[1::2, 1::2]) * 0.25
+    chroma = block @ _CHROMA + _CHROMA_OFFSET
+    luma_size, chroma_size = height * width, height * width // 4
+    buffer = np.zeros(luma_size + 2 * chroma_size + _TAIL, np.uint8)
+    buffer[:luma_size] = (full @ _LUMA + _LUMA_OFFSET).ravel()  # truncating value + 0.5: rounding
+    buffer[luma_size : luma_size + chroma_size] = chroma[..., 0].ravel()
+    buffer[luma_size + chroma_size : luma_size + 2 * chroma_size] = chroma[..., 1].ravel()
+    packed = buffer[: luma_size + 2 * chroma_size].reshape(height * 3 // 2, width)
+    return av.VideoFrame.from_numpy_buffer(packed, format="yuv420p")
 
 
 def _write_gif(path: Path, frames: np.ndarray, fps: float) -> None:
