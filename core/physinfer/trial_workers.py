@@ -13,7 +13,6 @@ embeds the whole batch together, and only clips cross the wire.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import Executor
@@ -26,8 +25,7 @@ from physinfer.evaluation import simulate_one
 from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.types import Clip
-
-_local = threading.local()
+from physinfer.worker_cache import thread_cached
 
 
 @dataclass(frozen=True)
@@ -61,16 +59,17 @@ def scene_items(scene: Mapping[str, Any] | None) -> tuple[tuple[str, Any], ...] 
 
 def worker_pipeline(spec: PipelineSpec) -> Any:
     """The simulator and renderer of ``spec`` in this worker thread, built on first use."""
-    cache: dict[PipelineSpec, Any] = _local.__dict__.setdefault("pipelines", {})
-    if spec not in cache:
+
+    def build() -> Any:
         if spec.threads is not None:
             limit_threads(spec.threads)
         registry, _ = load_registry()
-        cache[spec] = build_pipeline(
+        return build_pipeline(
             registry, spec.plugin, effects=spec.effects, embedder="", fixed=spec.fixed, duration_s=spec.duration_s,
             scene_set=dict(spec.scene) if spec.scene is not None else None,
         )  # fmt: skip
-    return cache[spec]
+
+    return thread_cached("refine.trial_pipelines", spec, build)
 
 
 def simulate_and_render(

@@ -399,6 +399,7 @@ def _register_wave(registry):
 @pytest.fixture
 def wave_registry(monkeypatch):
     import physinfer.plugins
+    from physinfer.cli import common  # imported before the patch, so that it binds the real one
 
     real = physinfer.plugins.load_registry
     plugin = types.SimpleNamespace(physinfer_register_phenomena=_register_wave)
@@ -407,6 +408,10 @@ def wave_registry(monkeypatch):
         "load_registry",
         lambda: real(extra_plugins={"wave_plugin": plugin}, load_entry_points=False),
     )
+    yield
+    # The CLI's registry, built once per process, must not be the wave-only one: a test run in
+    # this process after this one would find no `dataset` command (seen when this file ran alone).
+    common.registry_and_infos.cache_clear()
 
 
 def test_cli_generate_prints_one_json_object(wave_registry, tmp_path):
@@ -552,3 +557,4 @@ def test_a_binary_model_file_is_one_clear_line(tmp_path, physinfer_cli):
     model.write_bytes(bytes(range(256)) * 4)
     proc = physinfer_cli("refine", "--plugin", "pendulum_lab", "--model", model, "--out", tmp_path / "r", "--json")
     assert proc.returncode == 2 and "is not JSON" in proc.json()["error"]
+

@@ -107,6 +107,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.datasets.executors": "the executors (inline, processes, Dask) and how their "
         "worker processes start; every workflow's jobs run on them",
         "physinfer.trial_workers": "",
+        "physinfer.worker_cache": "the models a worker thread builds once, for every workflow's jobs",
     },
     "footage": {
         "physinfer.conditioning": "",

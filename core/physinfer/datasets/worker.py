@@ -13,7 +13,6 @@ from __future__ import annotations
 import os
 import pickle
 import socket
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,8 +30,7 @@ from physinfer.errors import PhysinferError, SimulationFailed
 from physinfer.io import atomic_path, to_jsonable
 from physinfer.types import Clip, Trajectory
 from physinfer.video import center_crop_resize, resample, to_gray
-
-_local = threading.local()
+from physinfer.worker_cache import thread_cached
 
 
 @dataclass(frozen=True)
@@ -61,13 +59,9 @@ class UnitJob:
 
 def cached_generator(blob: bytes, key: str) -> DatasetGenerator:
     """This thread's unpickled generator for ``key`` (one kept per thread; older ones closed)."""
-    cache: dict[str, DatasetGenerator] = getattr(_local, "generators", {})
-    if key not in cache:
-        for old in cache.values():
-            old.close()
-        cache = {key: pickle.loads(blob)}
-        _local.generators = cache
-    return cache[key]
+    return thread_cached(
+        "datasets.generators", key, lambda: pickle.loads(blob), only_latest=True, close=lambda old: old.close()
+    )
 
 
 def run_unit(job: UnitJob) -> dict[str, Any]:

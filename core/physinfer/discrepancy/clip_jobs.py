@@ -18,7 +18,6 @@ depend on the batch or torch's thread count).
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from physinfer.discrepancy.parallel import WorkerPool, worker_pipeline
 from physinfer.evaluation import ClipEmbedder, Pipeline, simulate_and_embed, simulate_many
 from physinfer.pipeline import fixed_by_user
 from physinfer.threads import refinement_torch_threads, torch_threads
+from physinfer.worker_cache import thread_cached
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings
@@ -39,8 +39,6 @@ if TYPE_CHECKING:
 Log = Callable[[str], None]
 T = TypeVar("T")
 R = TypeVar("R")
-
-_local = threading.local()
 
 
 @dataclass(frozen=True)
@@ -84,13 +82,13 @@ def _model(registry: Any, base: Pipeline, settings: DiagnoseSettings, effects: t
     """``base`` with ``effects`` switched in, built once per worker thread."""
     if not effects:
         return base
-    cache: dict[tuple[int, tuple[str, ...]], Pipeline] = _local.__dict__.setdefault("models", {})
-    key = (id(base), effects)
-    if key not in cache:
+
+    def build() -> Pipeline:
         # Effects are registered under the phenomenon's own name (bench_diagnose's flag_lite is "flag").
         objs = [registry.effect(name, phenomenon=base.phenomenon.name) for name in effects]
-        cache[key] = augmented_pipeline(base, objs, settings.duration_s, fixed_by_user(base, settings.fixed))
-    return cache[key]
+        return augmented_pipeline(base, objs, settings.duration_s, fixed_by_user(base, settings.fixed))
+
+    return thread_cached("diagnose.effect_models", (id(base), effects), build)
 
 
 class PooledProbe(Probe):

@@ -54,6 +54,7 @@ from physinfer.progress import StageProgress
 from physinfer.roles import Target
 from physinfer.scene import SceneRegistry
 from physinfer.threads import refinement_torch_threads, torch_threads
+from physinfer.worker_cache import thread_cached
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings
@@ -62,8 +63,6 @@ Log = Callable[[str], None]
 
 #: Seconds between looks at the stages' trial logs for the progress display.
 POLL_S = 0.5
-
-_local = threading.local()
 
 
 @dataclass(frozen=True)
@@ -178,11 +177,12 @@ def worker_pipeline(settings: DiagnoseSettings) -> tuple[Any, Any]:
         settings.embedder_frames, settings.fixed, tuple(sorted(settings.scene_set.items())),
         repr(settings.registry_factory),
     )  # fmt: skip
-    cache: dict[tuple, tuple[Any, Any]] = _local.__dict__.setdefault("pipelines", {})
-    if key not in cache:
+
+    def build() -> tuple[Any, Any]:
         registry = scene_registry(_installed(settings), settings)
-        cache[key] = (registry, build_base(registry, settings))
-    return cache[key]
+        return registry, build_base(registry, settings)
+
+    return thread_cached("diagnose.baselines", key, build)
 
 
 def warm_worker(settings: DiagnoseSettings) -> None:
