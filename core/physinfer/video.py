@@ -8,14 +8,9 @@ can cause comes back as a :class:`~physinfer.errors.UserInputError` that says wh
 
 from __future__ import annotations
 
-import ctypes
-import functools
 import logging
 import math
-import sys
-import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +19,7 @@ import numpy as np
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
 from physinfer.types import FPS_RANGE, Clip, check_fps
+from physinfer.zeroed_heap import zero_filled_allocations
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
@@ -366,8 +362,8 @@ def write_video(
     encodes whole macroblocks, cropped in the stream's header, from frames converted in
     numpy (:func:`yuv420p`), so that libx264 reads no byte PyAV leaves unset; libx264 also
     reads heap memory of its own that it never wrote, which glibc fills with zeros while a
-    video is written (:func:`zero_filled_allocations`), so the same frames give the same
-    file every time. Elsewhere than glibc that last source of difference remains.
+    video is written (:func:`physinfer.zeroed_heap.zero_filled_allocations`), so the same
+    frames give the same file every time. Elsewhere than glibc that last difference remains.
     """
     if isinstance(frames, Clip):
         frames, fps = frames.frames, frames.fps if fps is None else fps
@@ -387,55 +383,6 @@ def write_video(
         else:
             raise UserInputError(f"{path}: write .mp4 or .gif, not {suffix!r}")
     return path
-
-
-#: glibc's mallopt parameter that fills each block malloc hands out with ``value ^ 0xFF``.
-_M_PERTURB = -6
-_perturbing = threading.Lock()
-_writers = 0
-
-
-@functools.cache
-def _glibc() -> Any:
-    """glibc's ``mallopt``, or ``None`` elsewhere (macOS, musl's stub does nothing either)."""
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return None
-    return libc.mallopt if hasattr(libc, "mallopt") else None
-
-
-@contextmanager
-def zero_filled_allocations() -> Iterator[None]:
-    """While inside, glibc fills every block malloc hands out with zeros (and every freed one
-    with 0xFF).
-
-    Why: libx264 reads heap memory it allocated and never wrote, so the same frames gave
-    another stream whenever that memory held something else — the ball on a string's
-    frames, written in fresh processes, gave two streams in one test run (2026-11-27), and
-    a diagnosis' self-consistency targets moved its null scale by 6 %. With the blocks
-    zeroed every write is the same; it costs no measurable time (three writes of 150 frames
-    of 550 × 310: 1.5–1.7 s with, 1.6–1.8 s without). Writers in other threads keep it on
-    until the last one leaves.
-    """
-    global _writers
-    mallopt = _glibc()
-    if mallopt is None:
-        yield
-        return
-    with _perturbing:
-        if _writers == 0:
-            mallopt(_M_PERTURB, 0xFF)
-        _writers += 1
-    try:
-        yield
-    finally:
-        with _perturbing:
-            _writers -= 1
-            if _writers == 0:
-                mallopt(_M_PERTURB, 0)
 
 
 def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = False, crf: int = 18) -> None:

@@ -66,6 +66,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.devices": "a torch device checked before any work",
         "physinfer.registry": "the record plugins fill (scene and roles read it); the machinery "
         "that fills it (hooks, discovery) is the plugins floor",
+        "physinfer.zeroed_heap": "glibc's heap zero-filled while the encoder runs (video's)",
         "physinfer.video": "clip arrays to and from files, and the frame operations (gray, crop, "
         "resample) every floor uses; conditioning a user's video is the footage floor's",
     },
