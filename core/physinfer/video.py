@@ -12,7 +12,6 @@ import logging
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -358,12 +357,11 @@ def write_video(
 
     ``lossless``: H.264 in RGB without loss (``libx264rgb``, quantiser 0; a 200-frame 112-px
     flag clip takes 1.5 MB against 71 kB): reading it back gives these frames exactly. ``crf``:
-    the lossy quality (18 near-transparent; phones write about 23-28). The lossy path
-    encodes whole macroblocks, cropped in the stream's header, from frames converted in
-    numpy (:func:`yuv420p`), so that libx264 reads no byte PyAV leaves unset; libx264 also
-    reads heap memory of its own that it never wrote, which glibc fills with zeros while a
-    video is written (:func:`physinfer.zeroed_heap.zero_filled_allocations`), so the same
-    frames give the same file every time. Elsewhere than glibc that last difference remains.
+    the lossy quality (18 near-transparent; phones write about 23-28). libx264 reads bytes
+    nobody wrote (in PyAV's frames past a width not a multiple of 16, and in heap memory of
+    its own); glibc fills them with zeros while a video is written
+    (:func:`physinfer.zeroed_heap.zero_filled_allocations`), so the same frames give the same
+    file every time. Elsewhere than glibc the lossy path is not repeatable.
     """
     if isinstance(frames, Clip):
         frames, fps = frames.frames, frames.fps if fps is None else fps
@@ -393,63 +391,17 @@ def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = Fal
     pad_h, pad_w = frames.shape[1] % 2, frames.shape[2] % 2
     if pad_h or pad_w:
         frames = np.pad(frames, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)), mode="edge")
-    height, width = frames.shape[1:3]
-    # Lossy: encoded in whole 16-pixel macroblocks, the extra rows and columns cropped away in
-    # the stream's header (decoders show height × width); see yuv420p for why.
-    crop_h, crop_w = (0, 0) if lossless else (-height % 16, -width % 16)
     rate = Fraction(fps).limit_denominator(1001)
     with av.open(str(path), mode="w", format="mp4") as container:
         stream = container.add_stream("libx264rgb" if lossless else "libx264", rate=rate)
-        stream.width, stream.height = width + crop_w, height + crop_h
+        stream.width, stream.height = frames.shape[2], frames.shape[1]
         stream.pix_fmt = "rgb24" if lossless else "yuv420p"
-        stream.options = (
-            {"qp": "0", "preset": "veryfast"}
-            if lossless
-            else {"crf": str(int(crf)), "preset": "veryfast", "x264-params": f"crop-rect=0,0,{crop_w},{crop_h}"}
-        )
+        stream.options = {"qp": "0", "preset": "veryfast"} if lossless else {"crf": str(int(crf)), "preset": "veryfast"}
         for fr in frames:
-            if lossless:
-                frame = av.VideoFrame.from_ndarray(fr, format="rgb24")
-            else:
-                frame = yuv420p(np.pad(fr, ((0, crop_h), (0, crop_w), (0, 0)), mode="edge"))
-            for packet in stream.encode(frame):
+            for packet in stream.encode(av.VideoFrame.from_ndarray(fr, format="rgb24")):
                 container.mux(packet)
         for packet in stream.encode():
             container.mux(packet)
-
-
-#: RGB to Y', Cb, Cr: ITU-R BT.601 in limited range (Y' 16-235, chroma 16-240, so no clipping
-#: is needed), what decoders assume of a stream that does not say and what PyAV's conversion
-#: wrote before; 0.5 is added so that truncation rounds.
-_LUMA = np.array([65.481, 128.553, 24.966], np.float32) / 255
-_CHROMA = np.array([[-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]], np.float32).T / 255
-_LUMA_OFFSET, _CHROMA_OFFSET = 16.5, 128.5
-#: Zero bytes after the last plane handed to libx264, which reads past the end of a frame.
-_TAIL = 4096
-
-
-def yuv420p(rgb: np.ndarray) -> Any:
-    """An ``(H, W, 3)`` uint8 RGB frame (H and W multiples of 16) as a yuv420p
-    ``av.VideoFrame`` over a numpy buffer with zeros after its planes: BT.601 limited range,
-    each chroma sample from the mean colour of its 2×2 block.
-
-    Why not PyAV's own frames: libx264 reads bytes they leave unset (past a width that is not
-    a multiple of 16, below the last row, after the last plane), so the first write of the
-    same noisy frames in each process made another stream (the ball on a string, 550 × 310;
-    tests/core/test_video.py). Not every such difference is gone (:func:`write_video`)."""
-    import av
-
-    height, width = rgb.shape[:2]
-    full = rgb.astype(np.float32)
-    block = (full[0::2, 0::2] + full[0::2, 1::2] + full[1::2, 0::2] + full[1::2, 1::2]) * 0.25
-    chroma = block @ _CHROMA + _CHROMA_OFFSET
-    luma_size, chroma_size = height * width, height * width // 4
-    buffer = np.zeros(luma_size + 2 * chroma_size + _TAIL, np.uint8)
-    buffer[:luma_size] = (full @ _LUMA + _LUMA_OFFSET).ravel()  # truncating value + 0.5: rounding
-    buffer[luma_size : luma_size + chroma_size] = chroma[..., 0].ravel()
-    buffer[luma_size + chroma_size : luma_size + 2 * chroma_size] = chroma[..., 1].ravel()
-    packed = buffer[: luma_size + 2 * chroma_size].reshape(height * 3 // 2, width)
-    return av.VideoFrame.from_numpy_buffer(packed, format="yuv420p")
 
 
 def _write_gif(path: Path, frames: np.ndarray, fps: float) -> None:

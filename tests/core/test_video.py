@@ -98,11 +98,10 @@ def written_in_fresh_processes(heap: str, processes: int = 2) -> set[str]:
 
 def test_a_lossy_mp4_of_the_same_frames_is_the_same_file_every_time(tmp_path: Path) -> None:
     """The camera round trip of the adequacy verdict and of clips as given writes lossy mp4s.
-    libx264 reads bytes nobody wrote: past a width not a multiple of 16 (the ball is 550 px)
-    and below the last row of PyAV's frames (gone: write_video hands it whole macroblocks),
-    and heap memory of its own (gone on glibc: zero-filled while a video is written). Before,
-    fresh processes gave two streams in one test run, and a heap whose free blocks held other
-    bytes (here: glibc told to fill them with 0xA5) gave a third."""
+    libx264 reads bytes nobody wrote: past a width not a multiple of 16 in PyAV's frames (the
+    ball is 550 px) and in heap memory of its own; on glibc both are zero-filled while a video
+    is written. Before, fresh processes gave two streams in one test run, and a heap whose
+    free blocks held other bytes (here: glibc told to fill them with 0xA5) gave a third."""
     if not REAL_BALL.exists():
         pytest.skip(f"real footage {REAL_BALL} is absent (it lives in ../shared/realvideo beside the checkout)")
     if not sys.platform.startswith("linux"):
