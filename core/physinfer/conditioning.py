@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from physinfer.errors import UserInputError
-from physinfer.framing import PrepareSettings, default_framing, prepare_clip
+from physinfer.framing import PrepareSettings, check_roi, default_framing, prepare_clip
 from physinfer.render_estimate import estimate_render_params
 from physinfer.static_background import freeze_static
 from physinfer.tracking import check_one_mover
@@ -105,6 +105,7 @@ def check_one_subject(clip: Clip, roi: Box | None, fps: float) -> None:
         UserInputError: naming the moving regions and asking for ``--roi``.
     """
     if roi is not None:
+        check_roi(roi, clip.frames.shape[1:3])  # before cropping: an empty region crashed the tracker
         x, y, w, h = (int(round(v)) for v in roi)
         clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
     check_one_mover(resample(clip, min(fps, float(clip.fps))))

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from physinfer.conditioning import check_one_subject
 from physinfer.errors import UserInputError
 from physinfer.framing import PrepareSettings, default_framing, prepare_clip
 from physinfer.testing.footage import textured_background
@@ -137,6 +138,14 @@ def test_a_subject_that_leaves_the_frame_is_refused(tmp_path):
 def test_a_roi_outside_the_frame_is_refused(still_camera, roi):
     with pytest.raises(UserInputError, match="is not inside the 640×360 frame"):
         prepare_clip(still_camera, settings=PrepareSettings(roi=roi))
+
+
+@pytest.mark.parametrize("roi", [(0, 0, 0, 0), (600, 10, 100, 100)])
+def test_an_empty_or_outside_roi_is_refused_before_the_one_subject_check(still_camera, roi):
+    # The motion embedder's one-subject check cropped first: an empty --roi crashed the tracker
+    # ("zero-size array to reduction operation maximum") instead of naming the option.
+    with pytest.raises(UserInputError, match="is not inside the 640×360 frame"):
+        check_one_subject(still_camera, roi, 20.0)
 
 
 def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_path):
