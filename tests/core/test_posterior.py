@@ -643,3 +643,19 @@ def test_refine_from_a_model_file_with_a_posterior_reports_it_without_a_search_b
     assert "search_box" not in result["posterior_source"]
     first = json.loads((out / "trials.jsonl").read_text().splitlines()[0])["params"]
     assert first == pytest.approx(model.values)
+
+
+def test_a_nuisance_parameter_is_printed_apart_not_as_not_identified():
+    from physinfer.posterior.workflow import summary_lines
+
+    space = ParameterSpace([ParameterSpec("length", (0.1, 3.0), "m"), ParameterSpec("phase", (0.0, 1.0), "cycles")])
+    rng = np.random.default_rng(0)
+    samples = np.column_stack([rng.normal(0.0, 0.01, 2000), rng.uniform(-1, 1, 2000)])
+    summary = marginals(samples, space)
+    assert summary["phase"]["label"] == "not identified"
+    plain = summary_lines(summary)
+    assert any("not identified" in line and "phase" in line for line in plain)
+    lines = summary_lines(summary, nuisance=("phase",))
+    assert not any("not identified" in line for line in lines)
+    assert lines[-1].startswith("  nuisance (what the video leaves open, not a measurement): phase = ")
+    assert any(line.startswith("  length = ") for line in lines)

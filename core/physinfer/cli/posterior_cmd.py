@@ -284,7 +284,7 @@ def infer_cmd(
         err_console.print(verdict, markup=False, highlight=False)
     for line in trust_lines(report):
         err_console.print(line, markup=False, highlight=False)
-    for line in summary_lines(report.marginals):
+    for line in summary_lines(report.marginals, report.nuisance):
         err_console.print(line, highlight=False)
     for pair in report.correlations[:3]:
         err_console.print(

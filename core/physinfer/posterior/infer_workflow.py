@@ -78,6 +78,7 @@ class PosteriorReport:
     degenerate: str | None = None
     notes: list[str] = field(default_factory=list)
     render_set: dict[str, Any] | None = None
+    nuisance: tuple[str, ...] = ()
 
     def plot(self, title: str = "") -> Any:
         """The corner plot of the identified parameters and the strongest correlated pair, in
@@ -110,6 +111,8 @@ class PosteriorReport:
             d["degenerate"] = self.degenerate
         if self.notes:
             d["notes"] = list(self.notes)
+        if self.nuisance:
+            d["nuisance"] = list(self.nuisance)
         if self.truth:
             d["truth"] = self.truth
             d["truth_in_ci90"] = {
@@ -229,6 +232,7 @@ def infer(
     report.truth = dict(target.truth) if target.truth else None
     report.scene = loaded.scene
     report.render_set = told or None
+    report.nuisance = tuple(getattr(loaded.phenomenon, "nuisance", ()) or ())
     if told and posterior is None and not loaded.estimator.config.render_inputs:
         report.notes += [
             f"the camera told was not used by {why}" for why in told_passed_over(registry, plugin, loaded.scene, told)
@@ -362,9 +366,26 @@ def trust_lines(report: PosteriorReport) -> list[str]:
     return lines + [f"note: {n}" for n in report.notes]
 
 
-def summary_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
+def summary_lines(marginals_: Mapping[str, Mapping[str, Any]], nuisance: Sequence[str] = ()) -> list[str]:
     """Printed lines: one per identified or weakly identified parameter, then one line
-    naming every parameter the video does not determine (their numbers are in the JSON)."""
+    naming every parameter the video does not determine (their numbers are in the JSON), then
+    the ``nuisance`` parameters on a line of their own: what the video leaves open and the
+    physics does not care about (a pendulum's phase) is no measurement, identified or not."""
+    measured = {name: m for name, m in marginals_.items() if name not in nuisance}
+    return _measured_lines(measured) + [
+        f"  nuisance (what the video leaves open, not a measurement): {_nuisance_text(name, marginals_[name])}"
+        for name in nuisance
+        if name in marginals_
+    ]
+
+
+def _nuisance_text(name: str, m: Mapping[str, Any]) -> str:
+    unit = f" {m['unit']}" if m.get("unit") else ""
+    lo, hi = m["ci90"]
+    return f"{name} = {m['median']:.3g}{unit} [90 %: {lo:.3g} – {hi:.3g}]"
+
+
+def _measured_lines(marginals_: Mapping[str, Mapping[str, Any]]) -> list[str]:
     shown = [
         format_marginal(name, m) for name, m in marginals_.items() if m["label"] == "identified"
     ]

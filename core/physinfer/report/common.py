@@ -50,6 +50,10 @@ def units_of(parameters: Sequence[Mapping[str, Any]] | None) -> dict[str, str]:
     }
 
 
+#: The note beside a nuisance parameter (a pendulum's phase) in a parameter table.
+NUISANCE_NOTE = "nuisance: what the video leaves open, not a measurement"
+
+
 def parameter_table(
     values: Mapping[str, float] | None,
     posterior: Mapping[str, Mapping[str, Any]] | None,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from physinfer.report.common import Content, correlations, parameter_table, read_json
+from physinfer.report.common import NUISANCE_NOTE, Content, correlations, parameter_table, read_json
 from physinfer.report.markup import figure, fmt, key_values, paragraph, section
 
 
@@ -15,7 +15,10 @@ def infer_content(run: Path) -> Content:
     estimator = Path(str(report.get("estimator", "?"))).name
     subtitle = f"estimator: {estimator} · {report.get('n_samples')} samples · {fmt(sum(seconds.values()))} s"
     parts = [
-        parameter_table(None, report.get("posterior") or {}, report.get("truth"), {}, detail=True),
+        parameter_table(
+            None, report.get("posterior") or {}, report.get("truth"), {}, detail=True,
+            notes={name: NUISANCE_NOTE for name in report.get("nuisance") or ()},
+        ),  # fmt: skip
         paragraph(
             "contraction: how much narrower the posterior is than the prior "
             "(1: pinned down, 0: nothing learnt).",

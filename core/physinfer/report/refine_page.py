@@ -12,7 +12,14 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.adequacy import agreement_line, verdict_line
-from physinfer.report.common import Content, correlations, parameter_table, read_json, units_of
+from physinfer.report.common import (
+    NUISANCE_NOTE,
+    Content,
+    correlations,
+    parameter_table,
+    read_json,
+    units_of,
+)
 from physinfer.report.markup import figure, fmt, key_values, paragraph, section, table, video
 
 
@@ -58,6 +65,7 @@ def _parameters(result: Mapping[str, Any], info: Mapping[str, Any]) -> str:
     fixed = result.get("fixed") or {}
     notes = {name: f"best fit on its {side} bound" for name, side in bounds.items()}
     notes.update({name: "fixed (--fix)" for name in fixed})
+    notes.update({name: NUISANCE_NOTE for name in result.get("nuisance") or {}})
     best = {**result.get("best_params", {}), **fixed}
     truth = result.get("ground_truth") or info.get("truth")
     units = units_of(info.get("parameters"))

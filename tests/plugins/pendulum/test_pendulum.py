@@ -146,6 +146,7 @@ def test_infer_answers_the_real_ball_with_an_interval_and_a_verdict(tmp_path):
     low, high = report["posterior"]["length"]["ci90"]
     assert low <= truth <= high and report["posterior"]["length"]["label"] == "identified"
     assert report["adequacy"]["reproduces"] is True
+    assert report["nuisance"] == ["phase"]  # printed and shown apart, never as "not identified"
 
 
 def test_a_swing_smaller_than_the_bob_still_gives_its_period(pendulum):
