@@ -182,7 +182,16 @@ def assess_fit(
     return {**verdict(best_distance, floor, max(codec), motion), "codec_distances": codec}
 
 
-def verdict_line(adequacy: dict[str, Any] | None) -> str | None:
+#: What the verdict advises when the model does not reproduce a video (``refine``, ``infer``).
+ADVICE = "Run `physinfer diagnose` to find what the model lacks."
+#: The same for ``diagnose``, whose chosen model already carries the best effect it found.
+DIAGNOSE_ADVICE = (
+    "No effect tried makes this video: it may show another phenomenon, another region of the frame "
+    "(--roi), or more than the candidate effects can add."
+)
+
+
+def verdict_line(adequacy: dict[str, Any] | None, advice: str = ADVICE) -> str | None:
     """The printed sentence; ``None`` when the fit reproduces the target (or no verdict)."""
     if not adequacy or adequacy.get("reproduces") is not False:
         return None
@@ -202,7 +211,7 @@ def verdict_line(adequacy: dict[str, Any] | None) -> str | None:
         )
     return (
         f"THE MODEL DOES NOT REPRODUCE THIS VIDEO: {'; '.join(reasons)}; the numbers it gives are "
-        "unreliable. Run `physinfer diagnose` to find what the model lacks."
+        f"unreliable. {advice}"
     )
 
 

@@ -48,6 +48,7 @@ from physinfer.rundir import (
 )
 from physinfer.scene import scene_of
 from physinfer.specs import ModelSpec, RefineRequest, SearchSpec
+from physinfer.target import start_from_video
 from physinfer.threads import with_refinement_threads
 from physinfer.trial_workers import trial_workers
 from physinfer.video import side_by_side, write_video
@@ -226,48 +227,6 @@ def _search_start(registry: Registry, setup: _SetUp, optimizer: str, amortized: 
         }
         return _Start(warm_start_factory(factory, post_start.start_x, post_start.box), identity, None, post_start)
     return _Start(factory, {"start_x": None})
-
-
-#: Narrowest search box per parameter, normalised (a tenth of the range).
-MIN_BOX = 0.2
-
-
-def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict[str, Any]] | None:
-    """The search's start and box from what the target video tells directly
-    (``Phenomenon.video_estimate``), or ``None`` when the phenomenon reads nothing.
-
-    Returns:
-        ``(start_x, (lo, hi), record)``: normalised start and box, and the estimate for
-        ``run.json`` (``start``).
-    """
-    estimate_of = pipeline.phenomenon.video_estimate
-    if estimate_of is None:
-        return None
-    space = pipeline.simulator.parameter_space
-    estimate = {k: v for k, v in estimate_of(target.clip).items() if k in space.names}
-    if not estimate:
-        return None
-    lo, hi = -np.ones(len(space.names)), np.ones(len(space.names))
-    for i, spec in enumerate(space):
-        if spec.name in estimate:
-            low, high = sorted(np.clip(spec.to_unit(np.array(estimate[spec.name][1:])), -1.0, 1.0))
-            # An estimate beyond the range leaves no box: search the edge it points to.
-            lo[i], hi[i] = min(low, 1.0 - MIN_BOX), max(high, -1.0 + MIN_BOX)
-    values = {spec.name: float(np.clip(estimate[spec.name][0], *spec.bounds)) for spec in space if spec.name in estimate}
-    centre = np.clip(space.to_unit(space.complete(values)), lo, hi)  # the others start at their defaults
-    record: dict[str, Any] = {"video_estimate": {k: [float(x) for x in v] for k, v in estimate.items()}}
-    outside = {
-        spec.name: ("below" if estimate[spec.name][0] < spec.bounds[0] else "above")
-        for spec in space
-        if spec.name in estimate and not spec.bounds[0] <= estimate[spec.name][0] <= spec.bounds[1]
-    }
-    if outside:  # the search stays in range; the answer must say the video points beyond it
-        record["outside_range"] = {
-            name: f"the video suggests {name} {side} {space[name].bounds[0 if side == 'below' else 1]:g} "
-            f"{space[name].unit} ({estimate[name][0]:.3g} from the video alone)"
-            for name, side in outside.items()
-        }
-    return centre, (lo, hi), record
 
 
 def _floats(values: Any) -> list[float]:

@@ -29,6 +29,7 @@ def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     report = json.loads(lines[0])
     assert report["candidates"][0]["effect"] == "quadratic_drag"
     assert isinstance(report["misspecified"], bool)
+    assert report["adequacy"]["at"] in ("best baseline fit", "model with quadratic_drag")  # refine's verdict
     # Hand-edit the model file to the augmented model: refine --model switches drag in and
     # starts from the file's values.
     model = json.loads((out / "model.json").read_text())

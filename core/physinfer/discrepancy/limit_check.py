@@ -43,6 +43,7 @@ from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.stages import (
     GapContext,
     ablated_stage,
+    baseline_video_start,
     calibration_target,
     effect_stage,
     run_stage,
@@ -127,7 +128,8 @@ def check_one(
     embedding = base.embedder.embed(check_target.clip)
     gaps = GapContext(check_target, embedding, seeds, sub.out)
     common = {"registry": registry, "settings": sub, "target_label": "limit check"}
-    baseline = run_stage("baseline", base, check_target, steps=steps, start=None, **common)
+    baseline = run_stage("baseline", base, check_target, steps=steps, start=None,
+                         video_start=baseline_video_start(settings.out), **common)  # fmt: skip
     gap0 = gaps.measure(base, baseline.best_params, "baseline")
     control = run_stage("control", base, check_target, steps=effect_steps, start=baseline.best_params, **common)
     control_gap = gaps.measure(base, control.best_params, "control")

@@ -10,6 +10,7 @@ finished instead of running it again, and the decisions cannot depend on who ran
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,6 +114,7 @@ def run_stage(
     on_trial: OnTrial | None = None,
     embed_clips: ClipEmbedder | None = None,
     extra_starts: Sequence[Mapping[str, float]] = (),
+    video_start: VideoStart | None = None,
 ) -> RefineResult:
     """Refine ``pipeline`` in ``out/name`` (continuing a run already there).
 
@@ -130,13 +132,22 @@ def run_stage(
         embed_clips: Where the selection's re-simulations run (``None``: here).
         extra_starts: Physical points tried right after ``start``, before the optimizer's
             own proposals (an effect's ridge starts, :mod:`physinfer.discrepancy.ridge`).
+        video_start: Without a ``start``, start where the target video itself points and
+            search its box, as ``refine`` does (:func:`physinfer.target.start_from_video`; the
+            baseline's, given to the self-consistency runs as well: :func:`baseline_video_start`).
+            From the centre, the real ball on a string's baseline ended at 0.217 m with its
+            amplitude on the 60° bound (refine: 0.259 m, truth 0.2585), and the diagnosis named
+            air drag for it.
     """
     seed = settings.seed if seed is None else seed
     space = pipeline.simulator.parameter_space
     factory = registry.get("optimizers", settings.optimizer).load()
+    video_start = None if start is not None else video_start
     if start is not None:
         extra = [space.to_unit(space.complete(p)) for p in extra_starts]
         factory = warm_start_factory(factory, space.to_unit(space.complete(start)), extra=extra)
+    elif video_start is not None:
+        factory = warm_start_factory(factory, video_start[0], video_start[1])
     run_dir = RunDirectory(settings.out / name)
     run_info = {
         "plugin": settings.plugin,
@@ -150,6 +161,7 @@ def run_stage(
         "render_params": dict(target.render_params),
         "truth": target.truth,
         "start": None if start is None else {k: float(v) for k, v in start.items()},
+        **_video_start_identity(video_start),
         "stage": name,
         **({"extra_starts": [{k: float(v) for k, v in p.items()} for p in extra_starts]} if extra_starts else {}),
         **optional_settings(
@@ -176,6 +188,39 @@ def run_stage(
         on_trial=report,
         embed_clips=embed_clips,
     )
+
+
+#: ``(start_x, (lo, hi), record)``: a start and box read from the video (:func:`physinfer.target.start_from_video`).
+VideoStart = tuple[Any, Any, dict[str, Any]]
+
+
+def baseline_video_start(out: Path) -> VideoStart | None:
+    """The baseline stage's start and box from the video (its ``run.json``), or ``None``.
+
+    The self-consistency runs search as the baseline did: from its start, in its box (which
+    holds the baseline's fit, where their targets are made). Their targets' own estimates
+    would be another search: the pendulum's rendered 64-px self-target with the pivot out of
+    view read a 11.5° swing as 2.4° (the visible string lifts the centroid as the bob sinks), a
+    box without the truth, and a null scale a hundred times the real ball's gap.
+    """
+    path = out / "baseline" / RUN_FILE
+    info = json.loads(path.read_text()) if path.is_file() else {}
+    if "video_start" not in info:
+        return None
+    lo, hi = info["search_box"]
+    return np.asarray(info["start_x"], float), (np.asarray(lo, float), np.asarray(hi, float)), info["video_start"]
+
+
+def _video_start_identity(video_start: VideoStart | None) -> dict[str, Any]:
+    """``run.json``'s record of a start from the video (``refine``'s keys), or nothing."""
+    if video_start is None:
+        return {}
+    start_x, (lo, hi), record = video_start
+    return {
+        "video_start": record,
+        "start_x": [float(v) for v in start_x],
+        "search_box": [[float(v) for v in lo], [float(v) for v in hi]],
+    }
 
 
 def _trial_reporter(
@@ -309,6 +354,7 @@ def calibration_run(
     cal = run_stage(
         name, base, cal_target, registry=registry, settings=settings, steps=steps, start=None,
         target_label="self-consistency", seed=optimizer_seed, on_trial=on_trial,
+        video_start=baseline_video_start(settings.out),
     )  # fmt: skip
     gaps = GapContext(cal_target, base.embedder.embed(cal_target.clip), tuple(seeds), settings.out)
     gap = float(gaps.measure(base, cal.best_params, name).gap)

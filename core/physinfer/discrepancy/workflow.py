@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.adequacy import assess_fit
 from physinfer.discrepancy.calibration_stage import (
     calibrate,
     first_calibration_jobs,
@@ -84,7 +85,7 @@ from physinfer.registry import Registry
 from physinfer.report import write_report_quietly
 from physinfer.roles import Target
 from physinfer.scene import scene_of
-from physinfer.target import load_target
+from physinfer.target import load_target, start_from_video
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings
@@ -279,9 +280,12 @@ def _diagnose_stages(
             say("      " + note["message"])
     verdict = dataclasses.replace(found.verdict, named_leaves=remainder, unnamed=unnamed, lead=lead)
     found = dataclasses.replace(found, verdict=verdict)
+    with run.clock.stage("adequacy"):
+        adequacy = _chosen_model_adequacy(found, target, settings.seed)
     say("[6/6] localising and writing outputs")
     with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
+    report["adequacy"] = adequacy
     report["named_leaves"] = verdict.named_leaves
     report["unnamed"] = verdict.unnamed
     report["lead"] = verdict.lead
@@ -297,6 +301,15 @@ def _diagnose_stages(
     report["timing"] = {"stages_s": {k: round(v, 3) for k, v in run.clock.seconds.items()}, **workers}
     base.renderer.close()
     return report
+
+
+def _chosen_model_adequacy(found: Findings, target: Target, seed: int) -> dict[str, Any]:
+    """Whether the chosen model (the named effect's, else the best baseline fit) reproduces
+    the video at all (:func:`physinfer.adequacy.assess_fit`, as ``refine`` says it): a name is
+    no finding when even the model that carries it cannot make the video."""
+    stage = found.after
+    record = assess_fit(stage.pipeline, stage.best_params, float(stage.gap.gap), target, {"floor": stage.gap.floor}, seed)
+    return {**record, "at": f"model with {found.named}" if found.named else "best baseline fit"}
 
 
 def _start(
@@ -327,7 +340,8 @@ def _refine_baseline(run: _Run) -> tuple[RefineResult, NoiseFloor]:
     run.say(f"[1/6] refining the baseline ({run.steps} trials)")
     with run.clock.stage("baseline"):
         baseline = run_stage("baseline", run.base, run.target, steps=run.steps, start=None,
-                             target_label=run.target_label, embed_clips=resimulate, **run.common)  # fmt: skip
+                             video_start=start_from_video(run.base, run.target), target_label=run.target_label,
+                             embed_clips=resimulate, **run.common)  # fmt: skip
         gap0 = run.gaps.measure(run.base, baseline.best_params, "baseline", embed_clips=resimulate)
     return baseline, gap0
 

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from physinfer.adequacy import ADVICE, agreement_line, verdict_line
 from physinfer.errors import UserInputError
-from physinfer.report.markup import interval, paragraph, table
+from physinfer.report.markup import interval, paragraph, section, table
 
 
 @dataclass
@@ -113,3 +114,11 @@ def correlations(pairs: Sequence[Mapping[str, Any]] | None) -> list[str]:
         return []
     rows = [(p.get("a"), p.get("b"), p.get("r")) for p in pairs]
     return [paragraph("strongest posterior correlations:"), table(("a", "b", "r"), rows)]
+
+
+def adequacy_section(adequacy: Mapping[str, Any], advice: str = ADVICE) -> str:
+    """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
+    said = (verdict_line(dict(adequacy), advice) or agreement_line(dict(adequacy)) or "").strip()
+    text = said[:1].upper() + said[1:] if said else str(adequacy.get("note", "no verdict"))
+    cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
+    return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))

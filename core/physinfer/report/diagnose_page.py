@@ -11,9 +11,10 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from physinfer.adequacy import DIAGNOSE_ADVICE
 from physinfer.discrepancy.limit_text import limit_line, screened_line
 from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
-from physinfer.report.common import Content, parameter_table, read_json, units_of
+from physinfer.report.common import Content, adequacy_section, parameter_table, read_json, units_of
 from physinfer.report.markup import (
     figure,
     fmt,
@@ -38,7 +39,9 @@ def diagnose_content(run: Path) -> Content:
     clip = "the target beside the baseline fit (and the named effect's)"
     settings = {"plugin": report.get("plugin"), "target": report.get("target")}
     settings.update(report.get("settings") or {})
+    adequacy = report.get("adequacy")
     body = [
+        *([adequacy_section(adequacy, DIAGNOSE_ADVICE)] if adequacy else []),
         section("Verdict", verdict(report), candidates(report.get("candidates") or []),
                 screened(report.get("screened") or [])),
         detection_limits(report),

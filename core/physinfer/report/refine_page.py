@@ -11,10 +11,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from physinfer.adequacy import agreement_line, verdict_line
 from physinfer.report.common import (
     NUISANCE_NOTE,
     Content,
+    adequacy_section,
     correlations,
     parameter_table,
     read_json,
@@ -49,14 +49,6 @@ def refine_content(run: Path) -> Content:
     settings = {k: v for k, v in info.items() if k not in ("parameters", "truth")}
     body.append(section("Settings", key_values(settings)))
     return Content(title, subtitle, body)
-
-
-def adequacy_section(adequacy: Mapping[str, Any]) -> str:
-    """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
-    said = (verdict_line(dict(adequacy)) or agreement_line(dict(adequacy)) or "").strip()
-    text = said[:1].upper() + said[1:] if said else str(adequacy.get("note", "no verdict"))
-    cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
-    return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))
 
 
 def _parameters(result: Mapping[str, Any], info: Mapping[str, Any]) -> str:

@@ -193,3 +193,37 @@ def test_the_classroom_film_is_refused_whole_and_measured_within_its_region(tmp_
     result = json.loads((tmp_path / "roi" / "result.json").read_text())
     assert result["best_params"]["length"] == pytest.approx(1.0, rel=0.05)  # stated on screen
     assert result["adequacy"]["reproduces"] is True
+
+
+def test_diagnose_starts_where_the_video_points_and_says_when_no_model_makes_it(pendulum, tmp_path):
+    from physinfer.video import write_video
+
+    _, phenomenon = pendulum
+    target = write_video(
+        tmp_path / "swing.mp4", render(phenomenon, {"length": 0.7, "damping": 0.05, "amplitude": 12.0, "phase": 0.4}, 4.0)
+    )
+    small = ["--steps", "4", "--effect-steps", "3", "--optimizer", "random", "--calibration-runs", "1",
+             "--floor-samples", "4", "--no-limits", "--no-video", "--workers", "0"]  # fmt: skip
+    good = cli("diagnose", "--plugin", "pendulum", "--target", str(target), *small, "--out", str(tmp_path / "good"))
+    assert good.returncode == 0, good.stderr
+    # The baseline starts at the video's own estimate and searches its box, as refine does (from
+    # the centre the real ball's baseline ended at 0.217 m on the amplitude's bound).
+    run = json.loads((tmp_path / "good" / "baseline" / "run.json").read_text())
+    length = run["video_start"]["video_estimate"]["length"]
+    assert length[1] <= 0.7 <= length[2]
+    first = json.loads((tmp_path / "good" / "baseline" / "trials.jsonl").read_text().splitlines()[0])
+    assert first["params"]["length"] == pytest.approx(length[0], rel=1e-6)
+    # The self-consistency run searches as the baseline did: from its start, in its box.
+    own = json.loads((tmp_path / "good" / "calibration-0" / "run.json").read_text())
+    assert own["start_x"] == run["start_x"] and own["search_box"] == run["search_box"]
+    report = json.loads((tmp_path / "good" / "diagnosis.json").read_text())
+    assert report["adequacy"]["reproduces"] is True and report["adequacy"]["at"] == "best baseline fit"
+    assert "reproduces the video" in " ".join(good.stderr.split())
+    # A model held at the wrong length makes no version of this video: said first, on the page too.
+    wrong = cli("diagnose", "--plugin", "pendulum", "--target", str(target), *small, "--fix", "length=2.5",
+                "--out", str(tmp_path / "wrong"))  # fmt: skip
+    assert wrong.returncode == 0, wrong.stderr
+    said = " ".join(wrong.stderr.split())
+    assert "THE MODEL DOES NOT REPRODUCE THIS VIDEO" in said and "No effect tried makes this video" in said
+    assert json.loads((tmp_path / "wrong" / "diagnosis.json").read_text())["adequacy"]["reproduces"] is False
+    assert "No effect tried makes this video" in (tmp_path / "wrong" / "report.html").read_text()
