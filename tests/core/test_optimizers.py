@@ -87,6 +87,13 @@ def test_ax_falls_back_to_a_seeded_random_point_when_the_gp_cannot_be_fitted(mon
     batch = opt.ask(4)
     assert opt.fallbacks == 4 and len({tuple(t.x) for t in batch}) == 4, "a batch falls back to distinct draws"
 
+    def nan_draw(**_):  # torch's own error when NaN acquisition values reach BoTorch's initial draws
+        raise RuntimeError("probability tensor contains either `inf`, `nan` or element < 0")
+
+    opt = AxOptimizer(dim=3, seed=4)
+    monkeypatch.setattr(opt._client, "get_next_trials", nan_draw)
+    assert len(opt.ask(2)) == 2 and opt.fallbacks == 2
+
     def other(**_):
         raise RuntimeError("a real bug")
 

@@ -50,6 +50,15 @@ class _DropDuplicateFallback(logging.Filter):
 #: ``OptimizationGradientError`` (NaN acquisition gradients) was seen on a flag target with
 #: ``--batch-size 4``, asking for trials 17–20 (reproduced: held-out target 15 of bench_refine).
 _GP_FAILURES = frozenset({"ModelFittingError", "NotPSDError", "NanError", "OptimizationGradientError"})
+#: The same failure raised by torch itself: NaN acquisition values reach the multinomial draw of
+#: BoTorch's initial conditions (flag_lite's wind_inclination stage after 6 trials, wind_yaw 0.15, seed 100,
+#: 2026-11-27: "probability tensor contains either `inf`, `nan` or element < 0").
+_NAN_DRAW = "probability tensor contains"
+
+
+def _gp_failure(exc: Exception) -> bool:
+    """Whether ``exc`` is a failed GP fit or acquisition optimisation (not a bug of ours)."""
+    return type(exc).__name__ in _GP_FAILURES or (isinstance(exc, RuntimeError) and _NAN_DRAW in str(exc))
 
 
 class AxOptimizer(Optimizer):
@@ -132,7 +141,7 @@ class AxOptimizer(Optimizer):
         try:
             proposals = self._client.get_next_trials(max_trials=n)
         except Exception as exc:
-            if type(exc).__name__ not in _GP_FAILURES:
+            if not _gp_failure(exc):
                 raise
             return [self._fallback_trial() for _ in range(n)]
         _quiet_ax()  # modules imported lazily during the first GP fit log again
