@@ -225,19 +225,17 @@ def diagnosis_lines(report: dict, out: Path) -> list[str]:
     """What ``diagnose`` prints (without ``--json``), as rich markup: the verdict, a line per
     effect tried (and its detection limit), the effects screened out, the effect named and
     where the results are, the time taken."""
-    # Imported here: adequacy loads the footage modules (--help imports every command module).
-    from physinfer.adequacy import DIAGNOSE_ADVICE, agreement_line, verdict_line
-
-    adequacy = report.get("adequacy")
-    refused = verdict_line(adequacy, advice=DIAGNOSE_ADVICE)
-    agrees = agreement_line(adequacy)
+    adequacy = report.get("adequacy") or {}
+    said = adequacy.get("message")
+    refused = said if said and adequacy.get("reproduces") is False else None
+    agrees = said if said and adequacy.get("reproduces") else None
     return [
         *([f"[bold red]{escape(refused)}[/]"] if refused else []),
         _misspecified_line(report),
         *_candidate_lines(report),
         *[f"  {screened_line(c)}" for c in report.get("screened") or []],
         *_named_lines(report, out),
-        *([escape(agrees)] if agrees else []),
+        *([f"  {escape(agrees)}"] if agrees else []),
         timing_line(report),
     ]
 

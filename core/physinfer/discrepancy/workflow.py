@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from physinfer.adequacy import assess_fit
+from physinfer.adequacy import DIAGNOSE_ADVICE, agreement_line, assess_fit, verdict_line
 from physinfer.discrepancy.calibration_stage import (
     calibrate,
     first_calibration_jobs,
@@ -309,7 +309,9 @@ def _chosen_model_adequacy(found: Findings, target: Target, seed: int) -> dict[s
     no finding when even the model that carries it cannot make the video."""
     stage = found.after
     record = assess_fit(stage.pipeline, stage.best_params, float(stage.gap.gap), target, {"floor": stage.gap.floor}, seed)
-    return {**record, "at": f"model with {found.named}" if found.named else "best baseline fit"}
+    record["at"] = f"model with {found.named}" if found.named else "best baseline fit"
+    said = verdict_line(record, DIAGNOSE_ADVICE) or agreement_line(record)
+    return {**record, "message": said.strip() if said else None}
 
 
 def _start(
