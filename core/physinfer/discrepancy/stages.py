@@ -21,8 +21,13 @@ import numpy as np
 from physinfer import video
 from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
 from physinfer.discrepancy.gap import measure_gap
-from physinfer.discrepancy.starts import search_starts
-from physinfer.discrepancy.warmstart import warm_start_factory
+from physinfer.discrepancy.starts import (
+    VideoStart,
+    baseline_video_start,
+    search_starts,
+    stage_optimizer,
+    video_start_identity,
+)
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
@@ -132,22 +137,12 @@ def run_stage(
         embed_clips: Where the selection's re-simulations run (``None``: here).
         extra_starts: Physical points tried right after ``start``, before the optimizer's
             own proposals (an effect's ridge starts, :mod:`physinfer.discrepancy.ridge`).
-        video_start: Without a ``start``, start where the target video itself points and
-            search its box, as ``refine`` does (:func:`physinfer.target.start_from_video`; the
-            baseline's, given to the self-consistency runs as well: :func:`baseline_video_start`).
-            From the centre, the real ball on a string's baseline ended at 0.217 m with its
-            amplitude on the 60° bound (refine: 0.259 m, truth 0.2585), and the diagnosis named
-            air drag for it.
+        video_start: Without a ``start``, where the target video points, and its box
+            (:mod:`physinfer.discrepancy.starts`).
     """
     seed = settings.seed if seed is None else seed
-    space = pipeline.simulator.parameter_space
-    factory = registry.get("optimizers", settings.optimizer).load()
     video_start = None if start is not None else video_start
-    if start is not None:
-        extra = [space.to_unit(space.complete(p)) for p in extra_starts]
-        factory = warm_start_factory(factory, space.to_unit(space.complete(start)), extra=extra)
-    elif video_start is not None:
-        factory = warm_start_factory(factory, video_start[0], video_start[1])
+    factory = stage_optimizer(registry, settings.optimizer, pipeline, start, extra_starts, video_start)
     run_dir = RunDirectory(settings.out / name)
     run_info = {
         "plugin": settings.plugin,
@@ -156,12 +151,12 @@ def run_stage(
         "steps": steps,
         "effects": [e.name for e in pipeline.effects],
         "embedder": settings.embedder or pipeline.phenomenon.default_embedder,
-        "parameters": space.to_dict(),
+        "parameters": pipeline.simulator.parameter_space.to_dict(),
         "target": target_label,
         "render_params": dict(target.render_params),
         "truth": target.truth,
         "start": None if start is None else {k: float(v) for k, v in start.items()},
-        **_video_start_identity(video_start),
+        **video_start_identity(video_start),
         "stage": name,
         **({"extra_starts": [{k: float(v) for k, v in p.items()} for p in extra_starts]} if extra_starts else {}),
         **optional_settings(
@@ -188,39 +183,6 @@ def run_stage(
         on_trial=report,
         embed_clips=embed_clips,
     )
-
-
-#: ``(start_x, (lo, hi), record)``: a start and box read from the video (:func:`physinfer.target.start_from_video`).
-VideoStart = tuple[Any, Any, dict[str, Any]]
-
-
-def baseline_video_start(out: Path) -> VideoStart | None:
-    """The baseline stage's start and box from the video (its ``run.json``), or ``None``.
-
-    The self-consistency runs search as the baseline did: from its start, in its box (which
-    holds the baseline's fit, where their targets are made). Their targets' own estimates
-    would be another search: the pendulum's rendered 64-px self-target with the pivot out of
-    view read a 11.5° swing as 2.4° (the visible string lifts the centroid as the bob sinks), a
-    box without the truth, and a null scale a hundred times the real ball's gap.
-    """
-    path = out / "baseline" / RUN_FILE
-    info = json.loads(path.read_text()) if path.is_file() else {}
-    if "video_start" not in info:
-        return None
-    lo, hi = info["search_box"]
-    return np.asarray(info["start_x"], float), (np.asarray(lo, float), np.asarray(hi, float)), info["video_start"]
-
-
-def _video_start_identity(video_start: VideoStart | None) -> dict[str, Any]:
-    """``run.json``'s record of a start from the video (``refine``'s keys), or nothing."""
-    if video_start is None:
-        return {}
-    start_x, (lo, hi), record = video_start
-    return {
-        "video_start": record,
-        "start_x": [float(v) for v in start_x],
-        "search_box": [[float(v) for v in lo], [float(v) for v in hi]],
-    }
 
 
 def _trial_reporter(
@@ -269,7 +231,6 @@ def _encoded_once(
     encode_dir: Path, pipeline: Pipeline, params: Mapping[str, float], target: Target, seed: int
 ) -> Any:
     """The calibration target's clip after its round trip through the encoder, made once."""
-    import json
 
     path, key_path = encode_dir / "self_target.mp4", encode_dir / "self_target.json"
     key = {"params": {k: float(v) for k, v in params.items()}, "seed": int(seed),

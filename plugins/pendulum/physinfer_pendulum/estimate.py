@@ -20,8 +20,14 @@ G = 9.81
 #: and its floor and ceiling: the length box spans (1 ± slack)² around the estimate.
 SLACK_ONE_CYCLE, SLACK_MIN, SLACK_MAX = 0.3, 0.03, 0.5
 #: The amplitude read from the arc's curvature is searched up to this factor above it (camera
-#: tilt foreshortens the rise; a visible string pulls the centroid towards the pivot).
+#: tilt foreshortens the rise; a visible string pulls the centroid towards the pivot) …
 ANGLE_FACTOR = 1.8
+#: … and at least up to this angle (degrees). A string that enters from the frame's top edge
+#: lifts the centroid as the bob sinks and hides part of a moderate swing's rise: on 8-s renders
+#: of the default look (pivot out of view) 10° swings read as 1.7°, 4.5° and 4.2° and a 20° one
+#: as 10.5° (lengths 0.3, 1, 2.5 and 2.5 m), boxes that left the truth out; the pivot in view,
+#: 10° read as 2.0° once. Larger swings read within the factor.
+ANGLE_BOX_FLOOR = 25.0
 #: Decay rates (1/s) of the swing's amplitude tried by the fit; the damping is twice the rate.
 DECAY_RATES = (0.0, 0.01, 0.025, 0.05, 0.1, 0.15, 0.2, 0.3)
 #: Where the search starts for a swing smaller than the bob (its curvature unreadable).
@@ -115,7 +121,7 @@ def video_estimate(clip: Clip, max_amplitude_deg: float = 60.0) -> dict[str, tup
         # Noise across the swing (a codec, a small image) adds to the rise and reads as a larger
         # angle, never a smaller one: the box keeps every smaller angle (a clean 8-s target of
         # 9.5° read as 33° was fitted at 59° and 7 % short when the box stopped at 18°).
-        amplitude = (angle, 1.0, min(max_amplitude_deg, angle * ANGLE_FACTOR))
+        amplitude = (angle, 1.0, min(max_amplitude_deg, max(angle * ANGLE_FACTOR, ANGLE_BOX_FLOOR)))
     else:  # tracked by image shift (a swing smaller than the bob): no curvature to read
         amplitude = (SMALL_SWING_DEG, 1.0, max_amplitude_deg)
     return {
