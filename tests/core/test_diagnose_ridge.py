@@ -119,6 +119,10 @@ def test_a_lead_is_reported_when_not_misspecified_but_one_candidate_took_most_of
     assert closest_lead([weak], {}, misspecified=False, named=None, effect_steps=20) is None
     assert closest_lead([yaw], {"wind_yaw": off}, misspecified=False, named=None, effect_steps=20) is None
     assert "--duration" not in closest_lead([yaw], {}, misspecified=False, named=None, effect_steps=20)["message"]
+    # A user's video cannot be lengthened by --duration (the simulations last as long as it does).
+    filmed = closest_lead([yaw], {"wind_yaw": on}, misspecified=False, named=None, effect_steps=20, clip_seconds=25.6,
+                          user_video=True)["message"]  # fmt: skip
+    assert "a longer video of the same scene (about 51.2 s)" in filmed and "--duration" not in filmed
     # Shown under the verdict, on the page and in the terminal.
     from physinfer.cli.diagnose_cmd import _named_lines
     from physinfer.report.diagnose_page import verdict

@@ -87,6 +87,7 @@ def closest_unnamed(
     baseline_best: Mapping[str, float],
     effect_steps: int,
     clip_seconds: float | None = None,
+    user_video: bool = False,
 ) -> dict[str, Any] | None:
     """The report's ``unnamed``: ``None`` unless the model is misspecified and nothing named.
 
@@ -100,6 +101,7 @@ def closest_unnamed(
         baseline_best: The baseline's best fit (the values ``--fix`` would hold).
         effect_steps: The effect searches' budget.
         clip_seconds: The clip's length (``None``: not known; no longer clip is proposed).
+        user_video: The target is a user's video (a longer one must be filmed: :func:`longer_clip`).
 
     Returns:
         ``effect``, ``ratio``, ``failed`` (the checks it failed), ``ended_at_baseline``,
@@ -116,7 +118,7 @@ def closest_unnamed(
     settle += [f"--fix {p}=<its measured value> (the baseline fit says {baseline_best[p]:.4g})"
                for p in partners[:1] if p in baseline_best]  # fmt: skip
     if clip_seconds:
-        settle.append(f"a longer clip (--duration {2 * clip_seconds:.3g})")
+        settle.append(longer_clip(clip_seconds, user_video))
     where = (
         "its search ended at the baseline's fit with the effect off (a trapped search: the name is undecided)"
         if end.get("at_baseline")
@@ -151,6 +153,7 @@ def closest_lead(
     named: str | None,
     effect_steps: int,
     clip_seconds: float | None = None,
+    user_video: bool = False,
 ) -> dict[str, Any] | None:
     """The report's ``lead``: a candidate worth a second look when the model is *not* found
     misspecified.
@@ -167,6 +170,7 @@ def closest_lead(
         named: The named effect.
         effect_steps: The effect searches' budget.
         clip_seconds: The clip's length (``None``: not known; no longer clip is proposed).
+        user_video: The target is a user's video (a longer one must be filmed: :func:`longer_clip`).
 
     Returns:
         ``effect``, ``ratio``, ``effect_params``, ``failed`` (the checks it failed), ``settle``
@@ -179,7 +183,7 @@ def closest_lead(
     if not ratio <= LEAD_RATIO or ends.get(name, {}).get("effect_off", False):
         return None
     values = {str(k): float(v) for k, v in (best.get("effect_params") or {}).items()}
-    settle = [f"a longer clip (--duration {2 * clip_seconds:.3g})"] if clip_seconds else []
+    settle = [longer_clip(clip_seconds, user_video)] if clip_seconds else []
     settle.append(f"more trials for the effects' searches (--effect-steps {2 * effect_steps})")
     at = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
     why = f" ({'; '.join(failed)})" if failed else ""
@@ -189,6 +193,15 @@ def closest_lead(
     )
     return {"effect": name, "ratio": ratio, "effect_params": values, "failed": failed, "settle": settle,
             "message": message}  # fmt: skip
+
+
+def longer_clip(clip_seconds: float, user_video: bool) -> str:
+    """What a clip twice as long means: a longer video to film (``--duration`` cannot lengthen a
+    user's video: the simulations last as long as it does), or ``--duration`` for a target the
+    phenomenon renders itself."""
+    if user_video:
+        return f"a longer video of the same scene (about {2 * clip_seconds:.3g} s)"
+    return f"a longer clip (--duration {2 * clip_seconds:.3g})"
 
 
 def _closest(candidates: Sequence[Mapping[str, Any]]) -> tuple[Mapping[str, Any], str, list[str]]:

@@ -271,10 +271,11 @@ def _diagnose_stages(
     clip_seconds = None if limits is None else limits.get("clip_seconds")
     unnamed = closest_unnamed(
         found.candidates, ends, misspecified=misspecified, named=found.named, baseline_best=found.before.best_params,
-        effect_steps=run.effect_steps, clip_seconds=clip_seconds,
+        effect_steps=run.effect_steps, clip_seconds=clip_seconds, user_video=settings.target_path is not None,
     )  # fmt: skip
     lead = closest_lead(found.candidates, ends, misspecified=misspecified, named=found.named,
-                        effect_steps=run.effect_steps, clip_seconds=clip_seconds)  # fmt: skip
+                        effect_steps=run.effect_steps, clip_seconds=clip_seconds,
+                        user_video=settings.target_path is not None)  # fmt: skip
     for note in (unnamed, lead):
         if note is not None:
             say("      " + note["message"])
