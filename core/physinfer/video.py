@@ -149,6 +149,14 @@ def scaled_size(width: int, height: int, max_side: int | None) -> tuple[int, int
     return max(2, int(round(width * scale / 2)) * 2), max(2, int(round(height * scale / 2)) * 2)
 
 
+def upright(pixels: np.ndarray, rotation: float) -> np.ndarray:
+    """A decoded frame as it is meant to be seen: turned by the file's display rotation (degrees
+    counter-clockwise, a multiple of 90). A phone stores a portrait video as landscape frames
+    and this rotation; read without it, a flag's gravity would point sideways."""
+    turns = int(round(rotation / 90.0)) % 4
+    return np.ascontiguousarray(np.rot90(pixels, turns)) if turns else pixels
+
+
 def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
     import av
 
@@ -162,7 +170,7 @@ def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) 
             times: list[float | None] = []
             for frame in container.decode(stream):
                 width, height = scaled_size(frame.width, frame.height, max_side)
-                frames.append(frame.to_ndarray(width=width, height=height, format="rgb24"))
+                frames.append(upright(frame.to_ndarray(width=width, height=height, format="rgb24"), frame.rotation))
                 times.append(float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None)
                 if max_frames is not None and len(frames) >= max_frames:
                     break
@@ -255,7 +263,7 @@ def _read_gif(path: Path, max_frames: int | None, max_side: int | None = None) -
 
 
 def _read_image_folder(path: Path, max_frames: int | None, max_side: int | None = None) -> list[np.ndarray]:
-    from PIL import Image
+    from PIL import Image, ImageOps
 
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
@@ -263,8 +271,8 @@ def _read_image_folder(path: Path, max_frames: int | None, max_side: int | None 
     frames = []
     for f in files[:max_frames]:
         try:
-            with Image.open(f) as im:
-                frames.append(_pil_rgb(im, max_side))
+            with Image.open(f) as im:  # a phone's photo: upright as its EXIF orientation says
+                frames.append(_pil_rgb(ImageOps.exif_transpose(im), max_side))
         except Exception as exc:
             raise UserInputError(f"{f}: cannot read image ({exc})") from None
     if len({fr.shape for fr in frames}) > 1:

@@ -366,3 +366,42 @@ def test_a_variable_frame_rate_video_is_resampled_at_uniform_times(tmp_path: Pat
     with caplog.at_level("WARNING"):
         steady = read_video(even)
     assert steady.n_frames == 10 and steady.fps == pytest.approx(25.0) and "variable" not in caplog.text
+
+
+@pytest.mark.parametrize("degrees", [90, -90, 180])
+def test_a_phone_video_s_display_rotation_is_applied(tmp_path: Path, degrees: int) -> None:
+    """A phone stores a portrait video as landscape frames plus a display rotation: read
+    without it, the frames lie sideways (a flag's gravity would point along the ground)."""
+    import av
+
+    frames = np.zeros((4, 48, 80, 3), np.uint8)
+    frames[:, :16, :16] = 255  # a bright corner at the stored frame's top left
+    path = tmp_path / "portrait.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=25)
+        stream.width, stream.height, stream.pix_fmt = 80, 48, "yuv420p"
+        stream.set_display_rotation(degrees)
+        for pixels in frames:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(pixels, format="rgb24")))
+        container.mux(stream.encode())
+    clip = read_video(path)
+    expected = np.rot90(frames, degrees // 90, axes=(1, 2))  # counter-clockwise, as the file says
+    assert clip.frames.shape == expected.shape
+    assert np.abs(clip.frames.astype(int) - expected).mean() < 8
+
+
+def test_a_folder_of_phone_photos_is_read_upright(tmp_path: Path) -> None:
+    """Photos carry their orientation in EXIF (274): 6 means turn 90° clockwise to view."""
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    pixels = np.zeros((48, 80, 3), np.uint8)
+    pixels[:16, :16] = 255
+    for i in range(3):
+        image = Image.fromarray(pixels)
+        exif = image.getexif()
+        exif[274] = 6
+        image.save(folder / f"{i:02d}.jpg", exif=exif, quality=95)
+    clip = read_video(folder, fps=10.0)
+    assert clip.frames.shape == (3, 80, 48, 3)
+    expected = np.rot90(pixels, -1)  # clockwise: the bright corner moves to the top right
+    assert np.abs(clip.frames[0].astype(int) - expected).mean() < 8
