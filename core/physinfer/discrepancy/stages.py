@@ -24,6 +24,7 @@ from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.starts import (
     VideoStart,
     baseline_video_start,
+    check_resumed_start,
     search_starts,
     stage_optimizer,
     video_start_identity,
@@ -171,6 +172,7 @@ def run_stage(
         select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
     )  # fmt: skip
     resume = run_dir.run_file.is_file()
+    check_resumed_start(run_dir.run_file, video_start)
     report = None if on_trial is None else _trial_reporter(name, steps, on_trial)
     return run_refinement(
         pipeline,

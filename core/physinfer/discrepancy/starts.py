@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.discrepancy.warmstart import warm_start_factory
+from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.registry import Registry
 from physinfer.rundir import RUN_FILE
@@ -105,3 +106,21 @@ def video_start_identity(video_start: VideoStart | None) -> dict[str, Any]:
         "start_x": [float(v) for v in start_x],
         "search_box": [[float(v) for v in lo], [float(v) for v in hi]],
     }
+
+
+def check_resumed_start(run_file: Path, video_start: VideoStart | None) -> None:
+    """Refuse to continue a stage begun before searches started where the video points: its
+    trials came from the centre, and continuing them would give that search's answer again (a
+    pendulum diagnosis of the ball on a string made before 2026-11-27: 0.2165 m, air drag named).
+
+    Raises:
+        UserInputError: naming the folder and what to do.
+    """
+    if video_start is None or not run_file.is_file():
+        return
+    if "video_start" not in json.loads(run_file.read_text()):
+        raise UserInputError(
+            f"{run_file.parent} was refined from the centre by an earlier physinfer; diagnose now starts "
+            f"where the video points, and every later stage starts from that fit. Give a new --out, or "
+            f"delete {run_file.parent.parent} to diagnose again"
+        )

@@ -239,3 +239,18 @@ def test_the_amplitude_box_holds_a_moderate_swing_under_a_visible_string(pendulu
     clip = render(phenomenon, {"length": 1.0, "damping": 0.02, "amplitude": 10.0, "phase": 0.3}, 8.0)
     value, low, high = video_estimate(clip)["amplitude"]
     assert value < 10.0 and low <= 10.0 <= high
+
+
+def test_a_diagnosis_begun_from_the_centre_is_not_continued_silently(tmp_path):
+    from physinfer.discrepancy.starts import check_resumed_start
+    from physinfer.errors import UserInputError
+
+    run = tmp_path / "diag" / "baseline" / "run.json"
+    run.parent.mkdir(parents=True)
+    run.write_text(json.dumps({"plugin": "pendulum", "start": None}))  # an earlier physinfer's baseline
+    start = (np.zeros(4), (-np.ones(4), np.ones(4)), {"video_estimate": {}})
+    with pytest.raises(UserInputError, match="refined from the centre.*new --out"):
+        check_resumed_start(run, start)
+    check_resumed_start(run, None)  # a phenomenon that reads nothing from a video: as before
+    run.write_text(json.dumps({"plugin": "pendulum", "start": None, "video_start": {}}))
+    check_resumed_start(run, start)
