@@ -83,3 +83,19 @@ def test_a_diagnosis_holds_the_records_its_report_holds(tmp_path: Path):
     assert d.screened[0]["reason"] == "no signature" and d.screened[0].to_dict() == screened
     assert d.verdict == Verdict(misspecified=True, threshold=4.0, tested_gap=10.0, gap_over_null=5.0, gap_test=True,
                                 evidence=("gap",), named_effect="drag", gap_before=10.0, gap_after=1.0)  # fmt: skip
+
+
+def test_the_verdict_s_notes_are_typed_and_their_dicts_unchanged():
+    from physinfer.discrepancy.records import Note
+
+    lead = closest_lead([_candidate("yaw", gap=3.0, significant=False, p_value=0.3)], {}, misspecified=False,
+                        named=None, effect_steps=8, clip_seconds=2.4)  # fmt: skip
+    note = Note.from_dict(lead)
+    assert note.effect == "yaw" and note.message == lead["message"] and note.settle == tuple(lead["settle"])
+    assert note.to_dict() == lead and list(note) == list(lead) and note["ratio"] == lead["ratio"]
+    report = {"misspecified": False, "threshold": 1.0, "tested_gap": 0.5, "null_scale": 0.5, "gap_test": False,
+              "named_effect": None, "gap_before": 0.5, "gap_after": 0.5, "lead": json.loads(json.dumps(lead)),
+              "unnamed": None, "named_leaves": None}  # fmt: skip
+    verdict = Verdict.from_report(report)
+    assert isinstance(verdict.lead, Note) and verdict.lead.effect == "yaw" and verdict.unnamed is None
+    assert verdict.to_dict()["lead"] == lead and json.loads(json.dumps(verdict.to_dict()))["lead"] == lead

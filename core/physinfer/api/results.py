@@ -98,7 +98,8 @@ class Diagnosis:
             :class:`~physinfer.discrepancy.records.Screened` with its ``reason`` (no fit could
             name them on this target; see :mod:`physinfer.discrepancy.screen`).
         verdict: The decision as a :class:`~physinfer.discrepancy.records.Verdict`: by which
-            test, the threshold, and the notes (``named_leaves``, ``unnamed``, ``lead``);
+            test, the threshold, and the notes (``named_leaves``, ``unnamed``, ``lead``: each a
+            :class:`~physinfer.discrepancy.records.Note` with ``effect``, ``message`` and ``settle``);
             :meth:`from_report` always sets it; given ``None``, it is read from ``report``.
     """
 

@@ -154,6 +154,39 @@ class Screened(_ReadsAsDict):
 
 
 @dataclass(frozen=True, eq=False)
+class Note(_ReadsAsDict):
+    """A note on the verdict: ``named_leaves`` (what the named model still leaves), ``unnamed``
+    (misspecified, nothing named: the closest candidate) or ``lead`` (not misspecified, but a
+    candidate took most of the gap) — :mod:`~physinfer.discrepancy.unnamed`,
+    :func:`~physinfer.discrepancy.decide.remainder_after_naming`.
+
+    Attributes:
+        effect: The candidate the note is about.
+        message: The printed sentence.
+        settle: What would settle it (options, in words); empty for ``named_leaves``.
+        fields: Every entry of the note as ``diagnosis.json`` holds it (``ratio``, ``failed``,
+            ``trades_off_with``, ``gap``, ``threshold``, ... by kind).
+    """
+
+    effect: str
+    message: str
+    settle: tuple[str, ...]
+    fields: Mapping[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The note's entry of ``diagnosis.json``, key for key as the rule made it."""
+        return dict(self.fields)
+
+    @classmethod
+    def from_dict(cls, record: Mapping[str, Any] | None) -> Note | None:
+        """The note of a ``diagnosis.json`` entry (or of the rule's dict); ``None`` stays ``None``."""
+        if record is None:
+            return None
+        fields = record.to_dict() if isinstance(record, _ReadsAsDict) else dict(record)
+        return cls(str(fields["effect"]), str(fields["message"]), tuple(fields.get("settle") or ()), fields)
+
+
+@dataclass(frozen=True, eq=False)
 class Verdict(_ReadsAsDict):
     """The decision: is the model misspecified, by which test, and which effect it lacks.
 
@@ -188,9 +221,9 @@ class Verdict(_ReadsAsDict):
     named_effect: str | None = None
     gap_before: float | None = None
     gap_after: float | None = None
-    named_leaves: Mapping[str, Any] | None = None
-    unnamed: Mapping[str, Any] | None = None
-    lead: Mapping[str, Any] | None = None
+    named_leaves: Note | None = None
+    unnamed: Note | None = None
+    lead: Note | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The decision as a dict: the tests' keys as :func:`final_verdict` gave them
@@ -206,9 +239,9 @@ class Verdict(_ReadsAsDict):
             "named_effect": self.named_effect,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
-            "named_leaves": self.named_leaves,
-            "unnamed": self.unnamed,
-            "lead": self.lead,
+            "named_leaves": None if self.named_leaves is None else self.named_leaves.to_dict(),
+            "unnamed": None if self.unnamed is None else self.unnamed.to_dict(),
+            "lead": None if self.lead is None else self.lead.to_dict(),
         }
 
     @classmethod
@@ -226,7 +259,7 @@ class Verdict(_ReadsAsDict):
             named_effect=report.get("named_effect"),
             gap_before=report["gap_before"],
             gap_after=report["gap_after"],
-            named_leaves=report.get("named_leaves"),
-            unnamed=report.get("unnamed"),
-            lead=report.get("lead"),
+            named_leaves=Note.from_dict(report.get("named_leaves")),
+            unnamed=Note.from_dict(report.get("unnamed")),
+            lead=Note.from_dict(report.get("lead")),
         )

@@ -58,7 +58,7 @@ from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.outputs import Findings, write_outputs
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
-from physinfer.discrepancy.records import Candidate, Screened, Verdict
+from physinfer.discrepancy.records import Candidate, Note, Screened, Verdict
 from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.screen import refined_already, screen_effects
 from physinfer.discrepancy.stages import (
@@ -279,7 +279,8 @@ def _diagnose_stages(
     for note in (unnamed, lead):
         if note is not None:
             say("      " + note["message"])
-    verdict = dataclasses.replace(found.verdict, named_leaves=remainder, unnamed=unnamed, lead=lead)
+    verdict = dataclasses.replace(found.verdict, named_leaves=Note.from_dict(remainder), unnamed=Note.from_dict(unnamed),
+                                  lead=Note.from_dict(lead))  # fmt: skip
     found = dataclasses.replace(found, verdict=verdict)
     with run.clock.stage("adequacy"):
         adequacy = _chosen_model_adequacy(found, target, settings.seed)
@@ -287,9 +288,7 @@ def _diagnose_stages(
     with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
     report["adequacy"] = adequacy
-    report["named_leaves"] = verdict.named_leaves
-    report["unnamed"] = verdict.unnamed
-    report["lead"] = verdict.lead
+    report["named_leaves"], report["unnamed"], report["lead"] = remainder, unnamed, lead
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}
