@@ -48,7 +48,7 @@ from physinfer.rundir import (
 )
 from physinfer.scene import scene_of
 from physinfer.specs import ModelSpec, RefineRequest, SearchSpec
-from physinfer.target import start_from_video
+from physinfer.target import start_from_video, start_identity
 from physinfer.threads import with_refinement_threads
 from physinfer.trial_workers import trial_workers
 from physinfer.video import side_by_side, write_video
@@ -216,7 +216,7 @@ def _search_start(registry: Registry, setup: _SetUp, optimizer: str, amortized: 
         # What the whole video tells directly (a pendulum's period over 25 s) is sharper than
         # an estimator that reads its first seconds; the estimator's intervals are still reported.
         start_x, box, record = video_start
-        identity = {"start": record, "search_box": [_floats(ends) for ends in box], "start_x": _floats(start_x)}
+        identity = {"start": record, **start_identity(video_start)}
         return _Start(warm_start_factory(factory, start_x, box), identity, video_estimate=record)
     if amortized is not None:  # spend the budget where the video points
         post_start = posterior_start(amortized, space)

@@ -64,9 +64,12 @@ def load_target(
 
 #: Narrowest search box per parameter, normalised (a tenth of the range).
 MIN_BOX = 0.2
+#: ``(start_x, (lo, hi), record)``: a search's normalised start and box read from the video, and
+#: the estimate (:func:`start_from_video`).
+VideoStart = tuple[Any, Any, dict[str, Any]]
 
 
-def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict[str, Any]] | None:
+def start_from_video(pipeline: Pipeline, target: Target) -> VideoStart | None:
     """The search's start and box from what the target video tells directly
     (``Phenomenon.video_estimate``), or ``None`` when the phenomenon reads nothing.
 
@@ -102,3 +105,10 @@ def start_from_video(pipeline: Pipeline, target: Target) -> tuple[Any, Any, dict
             for name, side in outside.items()
         }
     return centre, (lo, hi), record
+
+
+def start_identity(video_start: VideoStart) -> dict[str, Any]:
+    """``run.json``'s entries for a start from the video that a resume must match: the box and
+    the start, normalised (the estimate itself is recorded beside them by the caller)."""
+    start_x, (lo, hi), _ = video_start
+    return {"search_box": [[float(v) for v in lo], [float(v) for v in hi]], "start_x": [float(v) for v in start_x]}

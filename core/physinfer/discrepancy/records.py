@@ -182,7 +182,7 @@ class Note(_ReadsAsDict):
         """The note of a ``diagnosis.json`` entry (or of the rule's dict); ``None`` stays ``None``."""
         if record is None:
             return None
-        fields = record.to_dict() if isinstance(record, _ReadsAsDict) else dict(record)
+        fields = dict(record)
         return cls(str(fields["effect"]), str(fields["message"]), tuple(fields.get("settle") or ()), fields)
 
 

@@ -22,7 +22,6 @@ from physinfer import video
 from physinfer.discrepancy.candidates import augmented_pipeline, warm_start
 from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.starts import (
-    VideoStart,
     baseline_video_start,
     check_resumed_start,
     search_starts,
@@ -40,6 +39,7 @@ from physinfer.registry import Registry
 from physinfer.roles import Effect, Target
 from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord, optional_settings
 from physinfer.scene import scene_of
+from physinfer.target import VideoStart
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings

@@ -27,6 +27,7 @@ from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.registry import Registry
 from physinfer.rundir import RUN_FILE
+from physinfer.target import VideoStart, start_identity
 
 RIDGE_FILE = "ridge.json"
 #: Starts handed to a search besides its first trial, at most.
@@ -75,10 +76,6 @@ def stage_optimizer(
     return factory
 
 
-#: ``(start_x, (lo, hi), record)``: a start and box read from the video (:func:`physinfer.target.start_from_video`).
-VideoStart = tuple[Any, Any, dict[str, Any]]
-
-
 def baseline_video_start(out: Path) -> VideoStart | None:
     """The baseline stage's start and box from the video (its ``run.json``), or ``None``.
 
@@ -98,14 +95,7 @@ def baseline_video_start(out: Path) -> VideoStart | None:
 
 def video_start_identity(video_start: VideoStart | None) -> dict[str, Any]:
     """``run.json``'s record of a start from the video (``refine``'s keys), or nothing."""
-    if video_start is None:
-        return {}
-    start_x, (lo, hi), record = video_start
-    return {
-        "video_start": record,
-        "start_x": [float(v) for v in start_x],
-        "search_box": [[float(v) for v in lo], [float(v) for v in hi]],
-    }
+    return {} if video_start is None else {"video_start": video_start[2], **start_identity(video_start)}
 
 
 def check_resumed_start(run_file: Path, video_start: VideoStart | None) -> None:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from physinfer.adequacy import ADVICE, agreement_line, verdict_line
+from physinfer.adequacy import agreement_line, verdict_line
 from physinfer.errors import UserInputError
 from physinfer.report.markup import interval, paragraph, section, table
 
@@ -116,9 +116,10 @@ def correlations(pairs: Sequence[Mapping[str, Any]] | None) -> list[str]:
     return [paragraph("strongest posterior correlations:"), table(("a", "b", "r"), rows)]
 
 
-def adequacy_section(adequacy: Mapping[str, Any], advice: str = ADVICE) -> str:
-    """Whether the best fit reproduces the video: the verdict first, then how it was measured."""
-    said = (verdict_line(dict(adequacy), advice) or agreement_line(dict(adequacy)) or "").strip()
+def adequacy_section(adequacy: Mapping[str, Any]) -> str:
+    """Whether the best fit reproduces the video: the verdict first (the record's own ``message``
+    where the command wrote one, as ``diagnose`` does), then how it was measured."""
+    said = (adequacy.get("message") or verdict_line(dict(adequacy)) or agreement_line(dict(adequacy)) or "").strip()
     text = said[:1].upper() + said[1:] if said else str(adequacy.get("note", "no verdict"))
     cls = {True: "verdict good", False: "verdict bad"}.get(adequacy.get("reproduces"), "note")
     return section("Does the model reproduce the video?", paragraph(text, cls), paragraph(str(adequacy.get("method")), "note"))

@@ -11,7 +11,6 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
-from physinfer.adequacy import DIAGNOSE_ADVICE
 from physinfer.discrepancy.limit_text import limit_line, screened_line
 from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
 from physinfer.report.common import Content, adequacy_section, parameter_table, read_json, units_of
@@ -41,7 +40,7 @@ def diagnose_content(run: Path) -> Content:
     settings.update(report.get("settings") or {})
     adequacy = report.get("adequacy")
     body = [
-        *([adequacy_section(adequacy, DIAGNOSE_ADVICE)] if adequacy else []),
+        *([adequacy_section(adequacy)] if adequacy else []),
         section("Verdict", verdict(report), candidates(report.get("candidates") or []),
                 screened(report.get("screened") or [])),
         detection_limits(report),
