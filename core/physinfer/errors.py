@@ -27,6 +27,16 @@ class UserInputError(PhysinferError, ValueError):
         super().__init__(f"{message}; {remedy}" if remedy else message)
 
 
+class ResumeMismatch(UserInputError):
+    """A run asked to continue was made with other settings; :attr:`shown` lists what differs
+    (``--seed: run 0, now 1``), so a command that resumes runs of its own (``diagnose``'s
+    stages) can say it in its own words and with its own remedy."""
+
+    def __init__(self, message: str, shown: str = "", *, remedy: str | None = None) -> None:
+        self.shown = shown
+        super().__init__(message, remedy=remedy)
+
+
 class SimulationFailed(PhysinferError, RuntimeError):
     """A simulation raised, produced NaN or blew up; the refinement records a failed trial."""
 

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from physinfer.errors import UserInputError
+from physinfer.errors import ResumeMismatch, UserInputError
 from physinfer.io import atomic_write_json, check_output_dir, to_jsonable
 from physinfer.outputs import MANIFEST_FILE, OutputFolder
 
@@ -237,7 +237,7 @@ class RunDirectory:
             The stored ``run.json``.
 
         Raises:
-            UserInputError: one line listing what differs (``--seed: run 0, now 1``).
+            ResumeMismatch: one line listing what differs (``--seed: run 0, now 1``).
         """
         stored = self.load_run_info()
         differences = resume_differences(stored, run_info, keys)
@@ -245,9 +245,10 @@ class RunDirectory:
             shown = "; ".join(differences[:SHOWN_DIFFERENCES])
             more = len(differences) - SHOWN_DIFFERENCES
             shown += f"; and {more} more" if more > 0 else ""
-            raise UserInputError(
+            raise ResumeMismatch(
                 f"cannot resume {self.path}, it was run otherwise: {shown}. Resume with the run's "
-                "settings, or start a new run (another --out, or --overwrite)"
+                "settings, or start a new run (another --out, or --overwrite)",
+                shown,
             )
         return stored
 

@@ -118,3 +118,20 @@ def test_refine_reports_a_fit_that_ended_on_a_bound(tmp_path: Path):
     assert length_line.endswith("(at its upper bound)")
     assert not any("damping" in line and "bound" in line for line in proc.stderr.splitlines())
     assert "length ended on a bound of the search range" in proc.stderr
+
+
+def test_a_diagnosis_continued_with_other_settings_is_refused_in_diagnose_s_words(tmp_path: Path):
+    """Refine's remedy (``--overwrite``) is an option diagnose does not have."""
+    target = tmp_path / "clean.mp4"
+    sim = _run("simulate", "--plugin", "pendulum_lab", "--render-set", "size=48", "--out", str(target))
+    assert sim.returncode == 0, sim.stderr
+    out = tmp_path / "diag"
+    args = ["diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48",
+            "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video", "--workers", "0",
+            "--out", str(out)]
+    assert _run(*args).returncode == 0
+    proc = _run(*args, "--seed", "5")
+    assert proc.returncode == 2
+    message = " ".join(proc.stderr.split())
+    assert f"{out} holds a diagnosis made otherwise (its baseline stage: --seed: run 0, now 5)" in message
+    assert "--overwrite" not in message and "Traceback" not in proc.stderr

@@ -28,7 +28,7 @@ from physinfer.discrepancy.starts import (
     stage_optimizer,
     video_start_identity,
 )
-from physinfer.errors import UserInputError
+from physinfer.errors import ResumeMismatch, UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
@@ -174,17 +174,17 @@ def run_stage(
     resume = run_dir.run_file.is_file()
     check_resumed_start(run_dir.run_file, video_start)
     report = None if on_trial is None else _trial_reporter(name, steps, on_trial)
-    return run_refinement(
-        pipeline,
-        target,
-        factory,
-        run_dir,
-        config,
-        run_info=run_info,
-        resume=resume,
-        on_trial=report,
-        embed_clips=embed_clips,
-    )
+    try:
+        return run_refinement(
+            pipeline, target, factory, run_dir, config,
+            run_info=run_info, resume=resume, on_trial=report, embed_clips=embed_clips,
+        )  # fmt: skip
+    except ResumeMismatch as exc:  # refine's remedy names --overwrite, which diagnose lacks
+        raise UserInputError(
+            f"{run_dir.path.parent} holds a diagnosis made otherwise (its {name} stage: {exc.shown})",
+            remedy="diagnose with the settings it was made with to continue it, or give another --out "
+            f"(or delete {run_dir.path.parent} to diagnose again)",
+        ) from None
 
 
 def _trial_reporter(
