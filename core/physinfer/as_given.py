@@ -127,7 +127,7 @@ def as_given(
     filmed = camera(clip, model.draw(rng), rng)
     try:
         conditioned, _zeta, _record = condition_target(
-            phenomenon, embedder, filmed, Conditioning(estimate_render=False), {}
+            phenomenon, embedder, filmed, Conditioning(estimate_render=False, mirror=False), {}
         )
     except UserInputError:
         return filmed

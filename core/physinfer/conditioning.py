@@ -19,10 +19,11 @@ estimated angles as well (docs/benchmarks.md, real-video conditions).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from physinfer.errors import UserInputError
+from physinfer.facing import face
 from physinfer.framing import PrepareSettings, check_roi, default_framing, prepare_clip
 from physinfer.render_estimate import estimate_render_params
 from physinfer.static_background import freeze_static
@@ -47,11 +48,15 @@ class Conditioning:
             instead of the one found.
         estimate_render: Estimate ζ from the (framed) clip where the phenomenon has an
             estimator, for the render settings not given.
+        mirror: ``True``: mirror the video before anything else (it shows the subject the
+            other way round from the renderer); ``False``: never; ``None``: where the
+            phenomenon reads a side (``Phenomenon.facing``), as read (:mod:`physinfer.facing`).
     """
 
     prepare: bool | None = None
     roi: Box | None = None
     estimate_render: bool = True
+    mirror: bool | None = None
 
     def wants_prepare(self, clip: Clip) -> bool:
         """Whether ``clip`` is framed: as asked, else when it is not square (or a roi is given)."""
@@ -164,11 +169,15 @@ def condition_target(
     Returns:
         ``(clip, zeta, record)``: the clip to compare with, the estimated ζ values to
         render with (only keys not in ``render_set``), and what was done for ``result.json``
-        (``prepared``: the framing found or why not; ``render_estimate``: the estimate with
+        (``facing``: whether it was mirrored, :mod:`physinfer.facing`; ``prepared``: the framing found or why not; ``render_estimate``: the estimate with
         its uncertainty, ``used`` and ``not_used_weak`` (read too poorly to render with), or
         why none).
     """
     record: dict[str, Any] = {}
+    clip, roi, facing = face(phenomenon, clip, conditioning.roi, conditioning.mirror)  # first: all below learnt one side
+    if facing is not None:
+        record["facing"] = facing.to_dict()
+        conditioning = replace(conditioning, roi=roi)
     if getattr(embedder, "compares_roi_only", False):  # a motion embedder tracks one subject
         check_one_subject(clip, conditioning.roi, float(embedder.fps))
     if conditioning.wants_prepare(clip):

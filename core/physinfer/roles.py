@@ -298,6 +298,11 @@ class Phenomenon:
             length within the range its unknown amplitude allows). ``refine`` without a
             posterior estimator starts its search at these values and searches only
             ``[low, high]`` for them (the whole range for the others); ``None``: no estimate.
+        facing: ``(clip) -> evidence``: which way round a video shows the subject, for a
+            renderer that draws it one way round (the flag flies to the right): above 0 the
+            renderer's way, below 0 mirrored, and ``|evidence| < 1`` cannot tell. A target
+            read as mirrored is mirrored before it is compared (:mod:`physinfer.facing`);
+            ``None``: the subject has no side (a pendulum) and videos are used as given.
     """
 
     name: str
@@ -322,3 +327,4 @@ class Phenomenon:
     nuisance: tuple[str, ...] = ()
     duration_from_target: bool = False
     video_estimate: Callable[[Clip], dict[str, tuple[float, float, float]]] | None = None
+    facing: Callable[[Clip], float] | None = None

@@ -112,6 +112,7 @@ TABLE: dict[str, dict[str, str]] = {
     },
     "footage": {
         "physinfer.conditioning": "",
+        "physinfer.facing": "which way round a video shows its subject; mirrored to the renderer's",
         "physinfer.framing": "",
         "physinfer.framing.checks": "",
         "physinfer.framing.clip": "",

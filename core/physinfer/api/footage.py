@@ -15,6 +15,7 @@ from physinfer.api.results import frames_figure
 from physinfer.api.values import required
 from physinfer.conditioning import parse_roi
 from physinfer.errors import UserInputError
+from physinfer.facing import Facing, face
 from physinfer.framing import (
     PrepareSettings,
     default_framing,
@@ -43,6 +44,9 @@ class PreparedVideo:
         render_estimate: The camera's render parameters read from the prepared clip, with
             their uncertainty (``None``: not asked for).
         paths: Files written (``video``, ``json``, ``overlay``; empty without ``out``).
+        facing: Whether the video was mirrored to show the subject the renderer's way round
+            (:mod:`physinfer.facing`; then ``box`` and ``square`` are in the mirrored video's
+            pixels), or ``None`` when the subject has no side.
     """
 
     plugin: str
@@ -51,6 +55,7 @@ class PreparedVideo:
     prepared: Any
     render_estimate: dict[str, Any] | None
     paths: dict[str, str] = field(default_factory=dict)
+    facing: Facing | None = None
 
     @property
     def clip(self) -> Clip:
@@ -64,6 +69,7 @@ class PreparedVideo:
             "target": str(self.target),
             "embedder": self.embedder,
             **self.prepared.to_dict(),
+            **({} if self.facing is None else {"facing": self.facing.to_dict()}),
             "render_estimate": self.render_estimate,
             **self.paths,
         }
@@ -113,13 +119,14 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
         fps=float(embedder.fps),
     )
     prepare_settings.validate()
+    clip, roi, facing = face(phenomenon, read_video(target, fps=o.fps), prepare_settings.roi, o.mirror)
     prepared = prepare_clip(
-        read_video(target, fps=o.fps), framing=phenomenon.framing or default_framing, settings=prepare_settings
+        clip, framing=phenomenon.framing or default_framing, settings=replace(prepare_settings, roi=roi)
     )
     estimate = None
     if not o.no_render_estimate:
         estimate = estimate_render_params(phenomenon, prepared.clip, embedder=embedder)
-    video = PreparedVideo(plugin, target, name, prepared, estimate)
+    video = PreparedVideo(plugin, target, name, prepared, estimate, facing=facing)
     if paths is not None:
         _write_prepared(video, paths)
     return video

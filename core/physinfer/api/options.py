@@ -78,10 +78,14 @@ class FootageOptions:
             prepare`` does).
         roi: ``"x,y,w,h"`` or four numbers: the region the subject moves in, in the video's
             pixels, instead of the one found.
+        mirror: ``True``: the video shows the subject the other way round from the renderer
+            (a flag flying left): mirror it first; ``False``: never mirror; ``None``: as the
+            phenomenon reads the video (:mod:`physinfer.facing`).
     """
 
     no_prepare: bool = False
     roi: str | tuple[float, float, float, float] | None = None
+    mirror: bool | None = None
 
     def conditioning(self, *, estimate_render: bool = False) -> Conditioning:
         """The :class:`~physinfer.conditioning.Conditioning` these options ask for."""
@@ -92,6 +96,7 @@ class FootageOptions:
             prepare=False if self.no_prepare else None,
             roi=None if roi is None else tuple(float(v) for v in roi),
             estimate_render=estimate_render,
+            mirror=self.mirror,
         )
 
 
@@ -350,6 +355,8 @@ class PrepareOptions:
         no_freeze: Keep the flicker of pixels that do not move (by default they are set to
             their temporal median, as a renderer draws a static background).
         no_render_estimate: Do not estimate the camera's render parameters ζ.
+        mirror: ``True``: mirror the video first (it shows the subject the other way round
+            from the renderer); ``False``: never; ``None``: as the phenomenon reads it.
     """
 
     target: Path | None = None
@@ -364,6 +371,7 @@ class PrepareOptions:
     no_stabilise: bool = False
     no_freeze: bool = False
     no_render_estimate: bool = False
+    mirror: bool | None = None
 
 
 @dataclass(frozen=True)

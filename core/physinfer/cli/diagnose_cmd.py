@@ -19,6 +19,7 @@ from physinfer.cli.app import (
     EmbedderFramesOpt,
     FixOpt,
     JsonOpt,
+    MirrorOpt,
     NoPrepareOpt,
     PluginOpt,
     RoiOpt,
@@ -203,6 +204,7 @@ def diagnose_cmd(
     scene_set: SceneSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
+    mirror: MirrorOpt = None,
     workers: _WorkersOpt = None,
     scheduler: _SchedulerOpt = None,
     as_json: JsonOpt = False,

@@ -93,6 +93,14 @@ RoiOpt = Annotated[
         help="x,y,w,h: the region the subject moves in, in --target's pixels (instead of the one found).",
     ),
 ]
+MirrorOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--mirror/--no-mirror",
+        help="--mirror: --target shows the subject the other way round from the renderer (a flag flying "
+        "left): mirror it first. --no-mirror: use it as it is. Default: as read from the video.",
+    ),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(

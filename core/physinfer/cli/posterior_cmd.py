@@ -15,6 +15,7 @@ from rich.markup import escape
 import physinfer
 from physinfer.cli.app import (
     JsonOpt,
+    MirrorOpt,
     NoPrepareOpt,
     PluginOpt,
     RoiOpt,
@@ -259,6 +260,7 @@ def infer_cmd(
     render_set: _InferRenderSetOpt = [],  # noqa: B006
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
+    mirror: MirrorOpt = None,
     check: _CheckOpt = True,
     as_json: JsonOpt = False,
 ) -> None:

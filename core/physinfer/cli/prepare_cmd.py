@@ -16,7 +16,7 @@ import typer
 from rich.markup import escape
 
 import physinfer
-from physinfer.cli.app import JsonOpt, PluginOpt, emit_json, err_console, handle_errors
+from physinfer.cli.app import JsonOpt, MirrorOpt, PluginOpt, emit_json, err_console, handle_errors
 from physinfer.cli.options import options_from_cli
 
 # The options of ``prepare``, declared here so its signature reads as a list of settings.
@@ -101,6 +101,7 @@ def prepare_cmd(
     no_stabilise: _NoStabiliseOpt = False,
     no_freeze: _NoFreezeOpt = False,
     no_render_estimate: _NoRenderEstimateOpt = False,
+    mirror: MirrorOpt = None,
     as_json: JsonOpt = False,
 ) -> None:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's framing, resample."""
@@ -129,6 +130,8 @@ def prepared_lines(video: Any) -> list[str]:
         f"({'removed, residual ' + format(result.residual_rms_px, '.2f') + ' px' if result.stabilised else 'left'}); "
         f"{result.clip.n_frames} frames at {result.fps_out:g} fps, {size}×{size}"
     ]
+    if video.facing is not None and video.facing.mirrored:
+        lines.append("mirrored: the video shows the subject the other way round from the renderer")
     if video.render_estimate is not None:
         lines.append(render_estimate_line(video.render_estimate))
     lines += [f"[yellow]warning:[/] {escape(warning)}" for warning in result.warnings]

@@ -18,6 +18,7 @@ from physinfer.cli.options import (
     FixOpt,
     FpsOpt,
     JsonOpt,
+    MirrorOpt,
     NoPrepareOpt,
     OptimizerOpt,
     PluginOpt,
@@ -159,6 +160,7 @@ def refine_cmd(
     no_posterior: _NoPosteriorOpt = False,
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
+    mirror: MirrorOpt = None,
     no_render_estimate: _NoRenderEstimateOpt = False,
     as_json: JsonOpt = False,
 ) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from physinfer import Effect, Phenomenon, Target, UserInputError
+from physinfer.registry import resolve
 from physinfer.scene import SceneSetting
 
 #: The shipped posterior estimator (``make posterior``).
@@ -141,7 +142,8 @@ def framing(box: tuple[float, float, float, float]) -> tuple[float, float, float
 
     The fly length in pixels is the larger of what the box's width (flying) and height
     (drooping) imply; the square hangs from the box's top-left corner, the hoist, as the
-    renderer's square hangs from the hoist top. Assumes the flag flies to the right.
+    renderer's square hangs from the hoist top. Assumes the flag flies to the right (a target
+    flying left is mirrored first: :mod:`physinfer_flag.facing`).
     """
     x, y, w, h = box
     length = max(w / FRAMING_SPAN[0], h / FRAMING_SPAN[1])
@@ -167,4 +169,5 @@ def make_phenomenon() -> Phenomenon:
         scene_posteriors=(str(SIZES_POSTERIOR), str(CAMERA_POSTERIOR), str(CORNERS_POSTERIOR)),
         framing=framing,
         scene_settings=SCENE_SETTINGS,
+        facing=resolve("physinfer_flag.facing:flag_facing"),
     )
