@@ -60,7 +60,7 @@ demo: install
 	$(BIN)/physinfer refine --plugin flag --out runs/demo --overwrite
 
 # Two pytest-xdist workers, each test file on one worker (a module's fixtures built once):
-# about 12 min on 2 cores (1,048 tests, 2026-11-26; 7 min when the suite was smaller). PYTEST_WORKERS=0 runs in-process.
+# about 13-16 min on 2 cores (1,108 tests: 15.8 min on a fresh install, 2026-11-27; 12 min for 1,048 on 2026-11-26). PYTEST_WORKERS=0 runs in-process.
 PYTEST_WORKERS ?= 2
 PYTEST_XDIST = $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist loadfile)
 
