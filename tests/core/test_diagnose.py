@@ -417,6 +417,8 @@ def test_diagnose_runs_end_to_end_and_resumes(tmp_path: Path):
     assert len(figure.axes[0].patches) == 2  # one bar for the baseline, one for the candidate
 
 
+# Slow (40 s): a layout of runs from before --calibration-runs (2026-11).
+@pytest.mark.slow
 def test_an_old_single_calibration_is_reused_as_run_zero(tmp_path: Path):
     """A diagnosis from before --calibration-runs (one ``calibration/``) continues without redoing it."""
     target = _pendulum_target(tmp_path, None)

@@ -184,6 +184,8 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     assert again["calibration"] == needed["calibration"] and again["named_effect"] == needed["named_effect"]
 
 
+# Slow (40 s): the rounds' scheduling; one process's equivalence is tested in test_diagnose.py.
+@pytest.mark.slow
 def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_the_control(tmp_path: Path):
     """The pendulum's floor is 0: its three first stages run in the round of the control and
     the drag model (five jobs), a later round refines no more controls than there are workers,
