@@ -18,9 +18,13 @@ estimated angles as well (docs/benchmarks.md, real-video conditions).
 
 from __future__ import annotations
 
+import logging
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
+
+import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.facing import face
@@ -29,12 +33,23 @@ from physinfer.render_estimate import estimate_render_params
 from physinfer.static_background import freeze_static
 from physinfer.tracking import check_one_mover
 from physinfer.types import Clip
-from physinfer.video import resample
+from physinfer.video import grid_luminance, resample
 
 Box = tuple[float, float, float, float]
 
 #: Share of a ζ component's spread its estimate must explain (1 − rms² / spread²) to be used.
 MIN_EXPLAINED = 0.5
+#: A still opening or ending at least this long is pointed out (with the ``--start`` or
+#: ``--end`` that leaves it out): a swing's turning points stay still under 0.15 s on 20
+#: simulated pendulums, the real ball on a string and the classroom film (2026-11-27).
+STILL_NOTE_S = 0.5
+#: A frame is still when its most-changed grid cell changes by less than this share of the
+#: clip's 90th-percentile change.
+STILL_SHARE = 0.2
+#: Cells per side of the grid the still check reads.
+STILL_GRID = 16
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -51,12 +66,20 @@ class Conditioning:
         mirror: ``True``: mirror the video before anything else (it shows the subject the
             other way round from the renderer); ``False``: never; ``None``: where the
             phenomenon reads a side (``Phenomenon.facing``), as read (:mod:`physinfer.facing`).
+        start_s: Seconds of the video left out at its start (``--start``): a phone clip
+            often opens on a hand letting go, which no simulation makes.
+        end_s: Second of the video at which the part used ends (``--end``; ``None``: its end).
     """
 
     prepare: bool | None = None
     roi: Box | None = None
     estimate_render: bool = True
     mirror: bool | None = None
+    start_s: float = 0.0
+    end_s: float | None = None
+
+    def __post_init__(self) -> None:
+        check_window(self.start_s, self.end_s)
 
     def wants_prepare(self, clip: Clip) -> bool:
         """Whether ``clip`` is framed: as asked, else when it is not square (or a roi is given)."""
@@ -64,6 +87,87 @@ class Conditioning:
             return self.prepare
         height, width = clip.size
         return self.roi is not None or height != width
+
+
+def check_window(start_s: float, end_s: float | None) -> None:
+    """Refuse a time window that is no window, before any video is read.
+
+    Raises:
+        UserInputError: a negative or non-finite ``--start``, or an ``--end`` not after it.
+    """
+    if not (math.isfinite(start_s) and start_s >= 0):
+        raise UserInputError(f"--start {start_s:g}: give the seconds to leave out at the video's start (>= 0)")
+    if end_s is not None and not (math.isfinite(end_s) and end_s > start_s):
+        raise UserInputError(f"--end {end_s:g}: give a second of the video after --start ({start_s:g})")
+
+
+def cut_window(clip: Clip, start_s: float, end_s: float | None) -> tuple[Clip, dict[str, Any] | None]:
+    """The part of ``clip`` from ``start_s`` to ``end_s`` (seconds), and what was kept
+    (``None`` when the whole video is used).
+
+    Raises:
+        UserInputError: a window past the video's end, or one keeping fewer than two frames.
+    """
+    if start_s == 0 and end_s is None:
+        return clip, None
+    length = clip.n_frames / clip.fps
+    if start_s >= length or (end_s is not None and end_s > length + 0.5 / clip.fps):
+        past = f"--start {start_s:g}" if start_s >= length else f"--end {end_s:g}"
+        raise UserInputError(
+            f"{past} s is past the end of the video ({length:.2f} s, {clip.n_frames} frames at {clip.fps:g} fps)"
+        )
+    first = int(round(start_s * clip.fps))
+    stop = clip.n_frames if end_s is None else min(clip.n_frames, int(round(end_s * clip.fps)))
+    if stop - first < 2:
+        asked = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
+        raise UserInputError(
+            f"{asked} keeps {max(0, stop - first)} frame(s) of the {length:.2f}-s video at {clip.fps:g} fps; "
+            "keep at least two"
+        )
+    kept = Clip(clip.frames[first:stop], clip.fps)
+    return kept, {"start_s": first / clip.fps, "end_s": stop / clip.fps, "frames": stop - first, "video_s": length}
+
+
+def still_ends(clip: Clip) -> tuple[float, float]:
+    """Seconds at the start and at the end of ``clip`` in which nothing moves: a hand holding
+    a pendulum's bob before it lets go, a recording left running after the motion died. A
+    simulation moves from its first frame to its last, so such seconds are compared with
+    motion that never happened (a 0.7-m swing held still for 2 s came back 0.79 m, "does not
+    reproduce"; with ``--start 2``, 0.70 m)."""
+    cells = grid_luminance(clip.frames, STILL_GRID)
+    if len(cells) < 3:
+        return 0.0, 0.0
+    change = np.abs(np.diff(cells, axis=0)).reshape(len(cells) - 1, -1).max(axis=1)
+    still = change < STILL_SHARE * np.percentile(change, 90)
+    if still.all():  # nothing moves at all: refused where the subject is looked for
+        return 0.0, 0.0
+    return int(np.argmin(still)) / clip.fps, int(np.argmin(still[::-1])) / clip.fps
+
+
+def note_still_ends(clip: Clip, roi: Box | None, window: dict[str, Any] | None) -> dict[str, float] | None:
+    """Point out a still opening or ending of ``clip`` (in ``roi`` when given) at least
+    :data:`STILL_NOTE_S` long, with the ``--start``/``--end`` that leaves it out; returns the
+    record (the still seconds at each end and the ``hint`` said) or ``None``."""
+    if roi is not None:
+        x, y, w, h = (int(round(v)) for v in roi)
+        clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
+    lead, tail = still_ends(clip)
+    if max(lead, tail) < STILL_NOTE_S:
+        return None
+    offset = window["start_s"] if window else 0.0
+    end = (window["end_s"] if window else clip.n_frames / clip.fps) - tail
+    parts = []
+    if lead >= STILL_NOTE_S:
+        parts.append(f"the first {lead:.1f} s of the video (--start {offset + lead:.1f} leaves them out)")
+    if tail >= STILL_NOTE_S:
+        parts.append(f"the last {tail:.1f} s (--end {end:.1f} leaves them out)")
+    hint = f"nothing moves in {' and in '.join(parts)}"
+    _log.warning(
+        "note: %s; a simulation moves from its first frame to its last, so still seconds are "
+        "compared with motion that never happened",
+        hint,
+    )
+    return {"start_s": round(lead, 3), "end_s": round(tail, 3), "hint": hint}
 
 
 def parse_roi(text: str | None) -> Box | None:
@@ -123,8 +227,6 @@ def outside_frozen(clip: Clip, roi: Box, square: Box) -> Clip:
     The framing's square extends past the region the user gave (a margin, a square shape),
     and whatever moves there (a flickering dial beside a pendulum) would be compared too.
     """
-    import numpy as np
-
     frames = clip.frames.copy()
     height, width = frames.shape[1:3]
     x0, y0, side = square[0], square[1], square[2]
@@ -169,12 +271,19 @@ def condition_target(
     Returns:
         ``(clip, zeta, record)``: the clip to compare with, the estimated ζ values to
         render with (only keys not in ``render_set``), and what was done for ``result.json``
-        (``facing``: whether it was mirrored, :mod:`physinfer.facing`; ``prepared``: the framing found or why not; ``render_estimate``: the estimate with
+        (``window``: the part of the video used, when ``--start``/``--end`` cut it;
+        ``facing``: whether it was mirrored, :mod:`physinfer.facing`; ``prepared``: the framing found or why not; ``render_estimate``: the estimate with
         its uncertainty, ``used`` and ``not_used_weak`` (read too poorly to render with), or
         why none).
     """
     record: dict[str, Any] = {}
-    clip, roi, facing = face(phenomenon, clip, conditioning.roi, conditioning.mirror)  # first: all below learnt one side
+    clip, window = cut_window(clip, conditioning.start_s, conditioning.end_s)  # first: the rest reads only this part
+    if window is not None:
+        record["window"] = window
+    still = note_still_ends(clip, conditioning.roi, window)
+    if still is not None:
+        record["still"] = still
+    clip, roi, facing = face(phenomenon, clip, conditioning.roi, conditioning.mirror)  # all below learnt one side
     if facing is not None:
         record["facing"] = facing.to_dict()
         conditioning = replace(conditioning, roi=roi)

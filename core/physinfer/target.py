@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.conditioning import Conditioning, condition_target
+from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.parameters import parse_float_assignments
 from physinfer.pipeline import full_parameter_space
@@ -45,6 +46,8 @@ def load_target(
     for name in truth_values:
         space[name]  # unknown names fail with the list of known ones
     if target_path is None:
+        if conditioning is not None and (conditioning.start_s or conditioning.end_s is not None):
+            raise UserInputError("--start and --end choose a part of --target: give --target too")
         target = pipeline.phenomenon.default_target()
         zeta = pipeline.renderer.check_render_params({**target.render_params, **render_set})
         merged_truth = {**(target.truth or {}), **truth_values}

@@ -81,11 +81,15 @@ class FootageOptions:
         mirror: ``True``: the video shows the subject the other way round from the renderer
             (a flag flying left): mirror it first; ``False``: never mirror; ``None``: as the
             phenomenon reads the video (:mod:`physinfer.facing`).
+        start: Seconds left out at the video's start (a hand letting go, a camera settling).
+        end: Second of the video at which the part compared ends (``None``: its end).
     """
 
     no_prepare: bool = False
     roi: str | tuple[float, float, float, float] | None = None
     mirror: bool | None = None
+    start: float = 0.0
+    end: float | None = None
 
     def conditioning(self, *, estimate_render: bool = False) -> Conditioning:
         """The :class:`~physinfer.conditioning.Conditioning` these options ask for."""
@@ -97,6 +101,8 @@ class FootageOptions:
             roi=None if roi is None else tuple(float(v) for v in roi),
             estimate_render=estimate_render,
             mirror=self.mirror,
+            start_s=float(self.start),
+            end_s=None if self.end is None else float(self.end),
         )
 
 

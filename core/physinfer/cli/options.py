@@ -101,6 +101,17 @@ MirrorOpt = Annotated[
         "left): mirror it first. --no-mirror: use it as it is. Default: as read from the video.",
     ),
 ]
+StartOpt = Annotated[
+    float,
+    typer.Option(
+        "--start",
+        help="Seconds of --target to leave out at its start (a hand letting go, a camera settling).",
+    ),
+]
+EndOpt = Annotated[
+    float | None,
+    typer.Option("--end", help="Second of --target at which the part compared ends (default: its end)."),
+]
 BatchSizeOpt = Annotated[
     int,
     typer.Option(

@@ -14,12 +14,14 @@ from rich.markup import escape
 
 import physinfer
 from physinfer.cli.app import (
+    EndOpt,
     JsonOpt,
     MirrorOpt,
     NoPrepareOpt,
     PluginOpt,
     RoiOpt,
     SceneSetOpt,
+    StartOpt,
     emit_json,
     err_console,
     handle_errors,
@@ -261,6 +263,8 @@ def infer_cmd(
     no_prepare: NoPrepareOpt = False,
     roi: RoiOpt = None,
     mirror: MirrorOpt = None,
+    start: StartOpt = 0.0,
+    end: EndOpt = None,
     check: _CheckOpt = True,
     as_json: JsonOpt = False,
 ) -> None:
