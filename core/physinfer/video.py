@@ -149,12 +149,35 @@ def scaled_size(width: int, height: int, max_side: int | None) -> tuple[int, int
     return max(2, int(round(width * scale / 2)) * 2), max(2, int(round(height * scale / 2)) * 2)
 
 
-def upright(pixels: np.ndarray, rotation: float) -> np.ndarray:
-    """A decoded frame as it is meant to be seen: turned by the file's display rotation (degrees
-    counter-clockwise, a multiple of 90). A phone stores a portrait video as landscape frames
-    and this rotation; read without it, a flag's gravity would point sideways."""
-    turns = int(round(rotation / 90.0)) % 4
-    return np.ascontiguousarray(np.rot90(pixels, turns)) if turns else pixels
+def upright(pixels: np.ndarray, matrix: tuple[int, int, int, int] | None) -> np.ndarray:
+    """A decoded frame as it is meant to be seen: transformed by the file's display matrix
+    (:func:`display_matrix`; ``None``: as stored). A phone stores a portrait video as landscape
+    frames and a rotation; a front camera or an editor may store a mirror too. Read without
+    it, a flag's gravity would point sideways; read as a rotation alone (PyAV's
+    ``frame.rotation``), a mirrored video came out upside down (checked against ffmpeg's own
+    autorotation for every rotation and flip: tests/core/test_video.py)."""
+    if matrix is None:
+        return pixels
+    a, b, c, d = matrix
+    if a * d - b * c < 0:  # a mirror: flip the stored picture, then turn it by the rest
+        pixels, a, b = pixels[:, ::-1], -a, -b
+    turns = int(round(math.degrees(math.atan2(c, a)) / 90.0)) % 4
+    return np.ascontiguousarray(np.rot90(pixels, turns)) if turns or pixels.strides[1] < 0 else pixels
+
+
+def display_matrix(frame: object) -> tuple[int, int, int, int] | None:
+    """The 2 × 2 part of a decoded frame's display matrix (libavutil's, 16.16 fixed point,
+    rounded to whole numbers: quarter turns and mirrors), or ``None`` for none. Falls back to
+    PyAV's ``frame.rotation`` (a rotation alone) where the side data cannot be read."""
+    try:
+        for data in frame.side_data:  # type: ignore[attr-defined]
+            if str(getattr(data, "type", "")).endswith("DISPLAYMATRIX"):
+                entries = np.frombuffer(bytes(data), dtype=np.int32)[[0, 1, 3, 4]] / 65536.0
+                return tuple(int(v) for v in np.round(entries))  # type: ignore[return-value]
+        return None
+    except Exception:  # an older PyAV without readable side data
+        turns = int(round(float(getattr(frame, "rotation", 0) or 0) / 90.0)) % 4
+        return [None, (0, -1, 1, 0), (-1, 0, 0, -1), (0, 1, -1, 0)][turns]
 
 
 def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
@@ -170,7 +193,7 @@ def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) 
             times: list[float | None] = []
             for frame in container.decode(stream):
                 width, height = scaled_size(frame.width, frame.height, max_side)
-                frames.append(upright(frame.to_ndarray(width=width, height=height, format="rgb24"), frame.rotation))
+                frames.append(upright(frame.to_ndarray(width=width, height=height, format="rgb24"), display_matrix(frame)))
                 times.append(float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None)
                 if max_frames is not None and len(frames) >= max_frames:
                     break

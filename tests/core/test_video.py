@@ -420,6 +420,55 @@ def test_a_phone_video_s_display_rotation_is_applied(tmp_path: Path, degrees: in
     assert np.abs(clip.frames.astype(int) - expected).mean() < 8
 
 
+def _ffmpeg_upright(ffmpeg: str, path: Path) -> np.ndarray:
+    """The first frame of ``path`` as ffmpeg itself shows it (it applies the display matrix)."""
+    import re
+    import subprocess
+
+    proc = subprocess.run([ffmpeg, "-v", "info", "-i", str(path), "-frames:v", "1", "-f", "rawvideo",
+                           "-pix_fmt", "rgb24", "-"], capture_output=True, check=True)  # fmt: skip
+    log = proc.stderr.decode()
+    width, height = map(int, re.search(r"Video: rawvideo.*?, (\d+)x(\d+),", log[log.index("Output #0") :]).groups())
+    return np.frombuffer(proc.stdout, np.uint8).reshape(height, width, 3)
+
+
+@pytest.mark.parametrize("degrees", [0, 90, 180, 270])
+@pytest.mark.parametrize("flips", [(), ("-display_hflip",), ("-display_vflip",), ("-display_hflip", "-display_vflip")])
+def test_a_mirrored_or_turned_display_matrix_is_read_as_ffmpeg_shows_it(tmp_path: Path, degrees: int, flips) -> None:
+    """A front camera or an editor may store a mirror in the display matrix. Read as a rotation
+    alone (PyAV's ``frame.rotation``), every singly mirrored video came out upside down."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
+    frames = np.zeros((3, 48, 80, 3), np.uint8)
+    frames[:, :16, :16] = 255  # a bright corner at the stored frame's top left
+    frames[:, :, 60:64, 0] = 255  # a red bar near its right edge
+    frames[:, 40:, :, 2] = 200  # a blue band along its bottom
+    stored = write_video(tmp_path / "stored.mp4", Clip(frames, 10.0))
+    path = tmp_path / "shown.mp4"
+    subprocess.run([ffmpeg, "-v", "error", "-display_rotation", str(degrees), *flips, "-i", str(stored),
+                    "-c", "copy", str(path)], check=True)  # fmt: skip
+    shown = _ffmpeg_upright(ffmpeg, path)
+    clip = read_video(path)
+    assert clip.frames.shape[1:] == shown.shape
+    assert np.abs(clip.frames[0].astype(int) - shown).mean() < 3
+
+
+def test_without_readable_side_data_the_rotation_alone_is_used() -> None:
+    from physinfer.video import display_matrix, upright
+
+    class OldFrame:  # an older PyAV: no side data to read, a rotation only
+        side_data = None
+        rotation = -90
+
+    matrix = display_matrix(OldFrame())
+    pixels = np.arange(6, dtype=np.uint8).reshape(2, 3, 1)
+    assert matrix == (0, 1, -1, 0) and np.array_equal(upright(pixels, matrix), np.rot90(pixels, 3))
+    assert upright(pixels, None) is pixels
+
+
 def test_a_folder_of_phone_photos_is_read_upright(tmp_path: Path) -> None:
     """Photos carry their orientation in EXIF (274): 6 means turn 90° clockwise to view."""
     folder = tmp_path / "photos"
