@@ -101,33 +101,6 @@ def check_window(start_s: float, end_s: float | None) -> None:
         raise UserInputError(f"--end {end_s:g}: give a second of the video after --start ({start_s:g})")
 
 
-def cut_window(clip: Clip, start_s: float, end_s: float | None) -> tuple[Clip, dict[str, Any] | None]:
-    """The part of ``clip`` from ``start_s`` to ``end_s`` (seconds), and what was kept
-    (``None`` when the whole video is used).
-
-    Raises:
-        UserInputError: a window past the video's end, or one keeping fewer than two frames.
-    """
-    if start_s == 0 and end_s is None:
-        return clip, None
-    length = clip.n_frames / clip.fps
-    if start_s >= length or (end_s is not None and end_s > length + 0.5 / clip.fps):
-        past = f"--start {start_s:g}" if start_s >= length else f"--end {end_s:g}"
-        raise UserInputError(
-            f"{past} s is past the end of the video ({length:.2f} s, {clip.n_frames} frames at {clip.fps:g} fps)"
-        )
-    first = int(round(start_s * clip.fps))
-    stop = clip.n_frames if end_s is None else min(clip.n_frames, int(round(end_s * clip.fps)))
-    if stop - first < 2:
-        asked = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
-        raise UserInputError(
-            f"{asked} keeps {max(0, stop - first)} frame(s) of the {length:.2f}-s video at {clip.fps:g} fps; "
-            "keep at least two"
-        )
-    kept = Clip(clip.frames[first:stop], clip.fps)
-    return kept, {"start_s": first / clip.fps, "end_s": stop / clip.fps, "frames": stop - first, "video_s": length}
-
-
 def still_ends(clip: Clip) -> tuple[float, float]:
     """Seconds at the start and at the end of ``clip`` in which nothing moves: a hand holding
     a pendulum's bob before it lets go, a recording left running after the motion died. A
@@ -144,21 +117,21 @@ def still_ends(clip: Clip) -> tuple[float, float]:
     return int(np.argmin(still)) / clip.fps, int(np.argmin(still[::-1])) / clip.fps
 
 
-def note_still_ends(clip: Clip, roi: Box | None, window: dict[str, Any] | None) -> dict[str, float] | None:
-    """Point out a still opening or ending of ``clip`` (in ``roi`` when given) at least
-    :data:`STILL_NOTE_S` long, with the ``--start``/``--end`` that leaves it out; returns the
-    record (the still seconds at each end and the ``hint`` said) or ``None``."""
+def note_still_ends(clip: Clip, roi: Box | None, start_s: float = 0.0) -> dict[str, Any] | None:
+    """Point out a still opening or ending of ``clip`` (in ``roi`` when given; read from
+    ``start_s`` of its video) at least :data:`STILL_NOTE_S` long, with the ``--start``/``--end``
+    that leaves it out; returns the record (the still seconds at each end and the ``hint``
+    said) or ``None``."""
     if roi is not None:
         x, y, w, h = (int(round(v)) for v in roi)
         clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
     lead, tail = still_ends(clip)
     if max(lead, tail) < STILL_NOTE_S:
         return None
-    offset = window["start_s"] if window else 0.0
-    end = (window["end_s"] if window else clip.n_frames / clip.fps) - tail
+    end = start_s + clip.n_frames / clip.fps - tail
     parts = []
     if lead >= STILL_NOTE_S:
-        parts.append(f"the first {lead:.1f} s of the video (--start {offset + lead:.1f} leaves them out)")
+        parts.append(f"the first {lead:.1f} s of the video (--start {start_s + lead:.1f} leaves them out)")
     if tail >= STILL_NOTE_S:
         parts.append(f"the last {tail:.1f} s (--end {end:.1f} leaves them out)")
     hint = f"nothing moves in {' and in '.join(parts)}"
@@ -264,23 +237,19 @@ def condition_target(
         phenomenon: The :class:`~physinfer.roles.Phenomenon` (its framing rule and ζ estimator).
         embedder: The pipeline's embedder (the framing's size and fps; the ζ read-out), or
             ``None`` when the command embeds nothing.
-        clip: The video as read.
+        clip: The video as read (the part ``--start``/``--end`` chose: :func:`physinfer.target.load_target`).
         conditioning: What to do.
         render_set: The user's ``--render-set`` (never overridden).
 
     Returns:
         ``(clip, zeta, record)``: the clip to compare with, the estimated ζ values to
         render with (only keys not in ``render_set``), and what was done for ``result.json``
-        (``window``: the part of the video used, when ``--start``/``--end`` cut it;
-        ``facing``: whether it was mirrored, :mod:`physinfer.facing`; ``prepared``: the framing found or why not; ``render_estimate``: the estimate with
+        (``still``: a still opening or ending pointed out; ``facing``: whether it was mirrored, :mod:`physinfer.facing`; ``prepared``: the framing found or why not; ``render_estimate``: the estimate with
         its uncertainty, ``used`` and ``not_used_weak`` (read too poorly to render with), or
         why none).
     """
     record: dict[str, Any] = {}
-    clip, window = cut_window(clip, conditioning.start_s, conditioning.end_s)  # first: the rest reads only this part
-    if window is not None:
-        record["window"] = window
-    still = note_still_ends(clip, conditioning.roi, window)
+    still = note_still_ends(clip, conditioning.roi, conditioning.start_s)
     if still is not None:
         record["still"] = still
     clip, roi, facing = face(phenomenon, clip, conditioning.roi, conditioning.mirror)  # all below learnt one side

@@ -38,7 +38,12 @@ _log = logging.getLogger(__name__)
 
 
 def read_video(
-    path: str | Path, fps: float | None = None, max_frames: int | None = None, *, max_side: int | None = None
+    path: str | Path,
+    fps: float | None = None,
+    max_frames: int | None = None,
+    *,
+    max_side: int | None = None,
+    skip_frames: int = 0,
 ) -> Clip:
     """Read a video file or a folder of images.
 
@@ -49,6 +54,8 @@ def read_video(
         max_frames: Stop after this many frames (None: all).
         max_side: Downscale frames whose longer side exceeds this while decoding (None: as
             stored).
+        skip_frames: Frames decoded and dropped before the first one kept (a part of a long
+            video is read without holding what comes before it).
 
     Returns:
         RGB clip, frames ``(T, H, W, 3)`` uint8.
@@ -62,18 +69,19 @@ def read_video(
     if not path.exists():
         raise UserInputError(f"video {path} does not exist; check the path")
     if path.is_dir():
-        frames, found_fps = _read_image_folder(path, max_frames, max_side), None
+        frames, found_fps = _read_image_folder(path, max_frames, max_side, skip_frames), None
     elif path.suffix.lower() == ".gif":
-        frames, found_fps = _read_gif(path, max_frames, max_side)
+        frames, found_fps = _read_gif(path, max_frames, max_side, skip_frames)
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        frames, found_fps = _read_pyav(path, max_frames, max_side)
+        frames, found_fps = _read_pyav(path, max_frames, max_side, skip_frames)
     else:
         raise UserInputError(
             f"{path}: unsupported video format {path.suffix!r}; use one of "
             f"{', '.join(sorted(VIDEO_SUFFIXES | {'.gif'}))} or a folder of images"
         )
     if len(frames) == 0:
-        raise UserInputError(f"{path}: the video has no frames")
+        after = f" after its first {skip_frames}" if skip_frames else ""
+        raise UserInputError(f"{path}: the video has no frames{after}")
     rate = fps if fps is not None else found_fps
     if rate is None or not math.isfinite(rate) or rate <= 0:
         raise UserInputError(f"{path}: cannot tell the frame rate; pass it with --fps")
@@ -84,17 +92,23 @@ def read_target_video(
     path: str | Path,
     fps: float | None = None,
     *,
+    start_s: float = 0.0,
+    end_s: float | None = None,
     max_side: int = TARGET_MAX_SIDE,
     max_bytes: int = TARGET_MAX_BYTES,
 ) -> Clip:
     """A user's target video, in bounded memory and checked to show something moving.
 
-    Frames are downscaled to ``max_side`` while decoding and reading stops after
-    ``max_bytes`` of frames (a warning says how much was kept).
+    Frames are downscaled to ``max_side`` while decoding; ``start_s`` and ``end_s`` (seconds
+    of the video, ``--start``/``--end``) choose the part read, and reading stops after
+    ``max_bytes`` of frames (a warning says how much was kept): the part of a long video is
+    read without holding what comes before it (a 1080p phone video fills the budget in about
+    11 s).
 
     Raises:
         UserInputError: as :func:`read_video`; a frame smaller than ``TARGET_MIN_SIDE`` on a
-            side; a video in which nothing moves.
+            side; a part past the video's end or of fewer than two frames; a video in which
+            nothing moves.
     """
     probe = read_video(path, fps, max_frames=1, max_side=max_side)
     height, width = probe.frames.shape[1:3]
@@ -104,14 +118,40 @@ def read_target_video(
             "each side to show the phenomenon"
         )
     budget = max(2, max_bytes // (height * width * 3))
-    clip = read_video(path, fps, max_frames=budget, max_side=max_side)
+    first = int(round(start_s * probe.fps))
+    wanted = budget if end_s is None else min(budget, int(round(end_s * probe.fps)) - first)
+    try:
+        clip = read_video(path, fps, max_frames=max(wanted, 1), max_side=max_side, skip_frames=first)
+    except UserInputError:
+        if not first:
+            raise
+        raise UserInputError(f"--start {start_s:g} s is past the end of {path}{_length_words(path)}") from None
     if len(clip.frames) >= budget:
+        kept = f"{budget / clip.fps:.1f} s from {start_s:g} s" if start_s else f"its first {budget / clip.fps:.1f} s"
         _log.warning(
-            "warning: %s is longer than %d frames at %d×%d; only its first %.1f s are used",
-            path, budget, width, height, budget / clip.fps,
+            "warning: %s is longer than %d frames at %d×%d; only %s are used (--start and --end choose the part)",
+            path, budget, width, height, kept,
         )  # fmt: skip
+    elif end_s is not None and len(clip.frames) < wanted - 1:  # the video ended before --end
+        raise UserInputError(
+            f"--end {end_s:g} s is past the end of {path} ({(first + len(clip.frames)) / clip.fps:.2f} s long)"
+        )
+    if len(clip.frames) < 2:
+        asked = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
+        raise UserInputError(f"{asked} keeps one frame of {path}; keep at least two")
     check_motion(clip, path)
     return clip
+
+
+def _length_words(path: str | Path) -> str:
+    """`` (N s long)`` as the container says, or nothing."""
+    try:
+        import av
+
+        with av.open(str(path)) as container:
+            return f" ({container.duration / 1e6:.2f} s long)" if container.duration else ""
+    except Exception:  # a gif, a folder, a container without a duration
+        return ""
 
 
 def check_motion(clip: Clip, path: str | Path) -> None:
@@ -180,7 +220,9 @@ def display_matrix(frame: object) -> tuple[int, int, int, int] | None:
         return [None, (0, -1, 1, 0), (-1, 0, 0, -1), (0, 1, -1, 0)][turns]
 
 
-def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
+def _read_pyav(
+    path: Path, max_frames: int | None, max_side: int | None = None, skip: int = 0
+) -> tuple[list[np.ndarray], float | None]:
     import av
 
     try:
@@ -191,7 +233,9 @@ def _read_pyav(path: Path, max_frames: int | None, max_side: int | None = None) 
             rate = stream.average_rate or stream.guessed_rate or stream.base_rate
             frames = []
             times: list[float | None] = []
-            for frame in container.decode(stream):
+            for index, frame in enumerate(container.decode(stream)):
+                if index < skip:
+                    continue
                 width, height = scaled_size(frame.width, frame.height, max_side)
                 frames.append(upright(frame.to_ndarray(width=width, height=height, format="rgb24"), display_matrix(frame)))
                 times.append(float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None)
@@ -259,7 +303,9 @@ def _pil_rgb(image: object, max_side: int | None) -> np.ndarray:
     return np.asarray(rgb if size == rgb.size else rgb.resize(size, Image.Resampling.BILINEAR))
 
 
-def _read_gif(path: Path, max_frames: int | None, max_side: int | None = None) -> tuple[list[np.ndarray], float | None]:
+def _read_gif(
+    path: Path, max_frames: int | None, max_side: int | None = None, skip: int = 0
+) -> tuple[list[np.ndarray], float | None]:
     from PIL import Image, ImageSequence
 
     try:
@@ -268,31 +314,33 @@ def _read_gif(path: Path, max_frames: int | None, max_side: int | None = None) -
             for frame in ImageSequence.Iterator(im):
                 frames.append(_pil_rgb(frame, max_side))
                 durations.append(frame.info.get("duration"))
-                if max_frames is not None and len(frames) >= max_frames:
+                if max_frames is not None and len(frames) >= max_frames + skip:
                     break
     except Exception as exc:
         raise UserInputError(f"{path}: cannot read the gif ({type(exc).__name__}: {exc})") from None
     known = [d for d in durations if d]
     if not known:
-        return frames, None
+        return frames[skip:], None
     # GIF writers (Pillow included) merge identical consecutive frames into one frame
     # shown for several frame times; repeat such frames so frame times stay uniform.
     base = float(min(known))
     repeats = [max(1, int(round(d / base))) if d else 1 for d in durations]
-    frames = [frame for frame, n in zip(frames, repeats, strict=True) for _ in range(n)]
+    frames = [frame for frame, n in zip(frames, repeats, strict=True) for _ in range(n)][skip:]
     if max_frames is not None:
         frames = frames[:max_frames]
     return frames, 1000.0 / base
 
 
-def _read_image_folder(path: Path, max_frames: int | None, max_side: int | None = None) -> list[np.ndarray]:
+def _read_image_folder(
+    path: Path, max_frames: int | None, max_side: int | None = None, skip: int = 0
+) -> list[np.ndarray]:
     from PIL import Image, ImageOps
 
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
         raise UserInputError(f"{path}: the folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
     frames = []
-    for f in files[:max_frames]:
+    for f in files[skip : None if max_frames is None else skip + max_frames]:
         try:
             with Image.open(f) as im:  # a phone's photo: upright as its EXIF orientation says
                 frames.append(_pil_rgb(ImageOps.exif_transpose(im), max_side))
