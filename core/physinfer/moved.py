@@ -37,6 +37,8 @@ MOVED: Mapping[str, str] = MappingProxyType({
                "EffectParameterError build_pipeline effect_parameters make_simulator naming_effects"),
     **_entries("physinfer.session", "physinfer.specs", "default_budget"),
     **_entries("physinfer.session", "physinfer.target", "load_target"),
+    **_entries("physinfer.video", "physinfer.target",
+               "STATIC_LEVELS TARGET_MAX_BYTES TARGET_MAX_SIDE TARGET_MIN_SIDE check_motion read_target_video"),
     **_entries("physinfer.discrepancy.workflow", "physinfer.discrepancy.settings", "DiagnoseSettings"),
     **_entries("physinfer.discrepancy.workflow", "physinfer.discrepancy.stages", "Stage calibration_seeds"),
     **_entries("physinfer.discrepancy.limits", "physinfer.discrepancy.settings", "LimitConfig"),

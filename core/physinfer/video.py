@@ -17,24 +17,18 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.io import atomic_path
+from physinfer.moved import moved_names
 from physinfer.types import FPS_RANGE, Clip, check_fps
 from physinfer.zeroed_heap import zero_filled_allocations
 
 VIDEO_SUFFIXES = {".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"}
 
-#: A target video's frames are decoded at most this large (longer side, pixels): a 4K video
-#: is downscaled while it is decoded, so its memory stays bounded (the embedders read 64-224 px).
-TARGET_MAX_SIDE = 1920
-#: At most this many bytes of decoded target frames: a longer video is cut, with a warning.
-TARGET_MAX_BYTES = 2 * 2**30
-#: Smallest shorter side of a target (pixels): a 1 x 128 "video" is no picture of anything.
-TARGET_MIN_SIDE = 32
-#: A target whose frame-to-frame change stays below this (gray levels, 99.9th percentile over
-#: pixels and frame pairs) shows nothing moving: codec noise reaches 1-2 levels.
-STATIC_LEVELS = 3.0
 
 _log = logging.getLogger(__name__)
+
+# A user's target read in bounded memory (read_target_video) moved to physinfer.target.
+__getattr__ = moved_names(__name__)
 
 
 def read_video(
@@ -86,86 +80,6 @@ def read_video(
     if rate is None or not math.isfinite(rate) or rate <= 0:
         raise UserInputError(f"{path}: cannot tell the frame rate; pass it with --fps")
     return Clip(_to_rgb(np.stack(frames)), float(rate))
-
-
-def read_target_video(
-    path: str | Path,
-    fps: float | None = None,
-    *,
-    start_s: float = 0.0,
-    end_s: float | None = None,
-    max_side: int = TARGET_MAX_SIDE,
-    max_bytes: int = TARGET_MAX_BYTES,
-) -> Clip:
-    """A user's target video, in bounded memory and checked to show something moving.
-
-    Frames are downscaled to ``max_side`` while decoding; ``start_s`` and ``end_s`` (seconds
-    of the video, ``--start``/``--end``) choose the part read, and reading stops after
-    ``max_bytes`` of frames (a warning says how much was kept): the part of a long video is
-    read without holding what comes before it (a 1080p phone video fills the budget in about
-    11 s).
-
-    Raises:
-        UserInputError: as :func:`read_video`; a frame smaller than ``TARGET_MIN_SIDE`` on a
-            side; a part past the video's end or of fewer than two frames; a video in which
-            nothing moves.
-    """
-    probe = read_video(path, fps, max_frames=1, max_side=max_side)
-    height, width = probe.frames.shape[1:3]
-    if min(height, width) < TARGET_MIN_SIDE:
-        raise UserInputError(
-            f"{path}: its frames are {width}×{height} pixels; a target needs at least {TARGET_MIN_SIDE} on "
-            "each side to show the phenomenon"
-        )
-    budget = max(2, max_bytes // (height * width * 3))
-    first = int(round(start_s * probe.fps))
-    wanted = budget if end_s is None else min(budget, int(round(end_s * probe.fps)) - first)
-    try:
-        clip = read_video(path, fps, max_frames=max(wanted, 1), max_side=max_side, skip_frames=first)
-    except UserInputError:
-        if not first:
-            raise
-        raise UserInputError(f"--start {start_s:g} s is past the end of {path}{_length_words(path)}") from None
-    if len(clip.frames) >= budget:
-        kept = f"{budget / clip.fps:.1f} s from {start_s:g} s" if start_s else f"its first {budget / clip.fps:.1f} s"
-        _log.warning(
-            "warning: %s is longer than %d frames at %d×%d; only %s are used (--start and --end choose the part)",
-            path, budget, width, height, kept,
-        )  # fmt: skip
-    elif end_s is not None and len(clip.frames) < wanted - 1:  # the video ended before --end
-        raise UserInputError(
-            f"--end {end_s:g} s is past the end of {path} ({(first + len(clip.frames)) / clip.fps:.2f} s long)"
-        )
-    if len(clip.frames) < 2:
-        asked = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
-        raise UserInputError(f"{asked} keeps one frame of {path}; keep at least two")
-    check_motion(clip, path)
-    return clip
-
-
-def _length_words(path: str | Path) -> str:
-    """`` (N s long)`` as the container says, or nothing."""
-    try:
-        import av
-
-        with av.open(str(path)) as container:
-            return f" ({container.duration / 1e6:.2f} s long)" if container.duration else ""
-    except Exception:  # a gif, a folder, a container without a duration
-        return ""
-
-
-def check_motion(clip: Clip, path: str | Path) -> None:
-    """Refuse a clip in which nothing changes beyond codec noise between frames."""
-    if len(clip.frames) < 2:
-        raise UserInputError(f"{path}: one frame is a picture, not a video; a target needs motion")
-    pairs = np.linspace(0, len(clip.frames) - 2, min(len(clip.frames) - 1, 50)).astype(int)
-    gray = lambda i: clip.frames[i, ::2, ::2].astype(np.float32).mean(axis=-1)  # noqa: E731
-    change = max(float(np.quantile(np.abs(gray(i + 1) - gray(i)), 0.999)) for i in pairs)
-    if change < STATIC_LEVELS:
-        raise UserInputError(
-            f"{path}: nothing moves in this video (frame-to-frame change at most {change:.1f} gray levels); "
-            "a target must show the phenomenon in motion"
-        )
 
 
 def _to_rgb(frames: np.ndarray) -> np.ndarray:

@@ -289,7 +289,7 @@ def test_a_video_unlike_the_training_clips_is_flagged_and_a_refinement_does_not_
     assert report.inputs["extrapolating"] and report.inputs["outside"] > 0.2 * report.inputs["dimensions"]
     assert any("extrapolated, not calibrated" in line for line in trust_lines(report))
     assert report.to_dict()["inputs"]["extrapolating"] is True
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     clip = read_target_video(video)
     found, note = posterior_for_refinement(

@@ -327,7 +327,7 @@ def _moving(n: int, height: int, width: int) -> np.ndarray:
 
 
 def test_a_large_target_is_downscaled_while_decoding_and_a_long_one_is_cut(tmp_path, caplog):
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     path = write_video(tmp_path / "wide.mp4", Clip(_moving(12, 600, 1000), 25.0))
     clip = read_target_video(path, max_side=250)
@@ -339,7 +339,7 @@ def test_a_large_target_is_downscaled_while_decoding_and_a_long_one_is_cut(tmp_p
 
 def test_a_static_or_tiny_target_is_refused_with_one_line(tmp_path, physinfer_cli):
     from physinfer.errors import UserInputError
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     rng = np.random.default_rng(0)
     still = np.repeat(rng.integers(0, 255, (1, 96, 128, 3), dtype=np.uint8), 30, axis=0)

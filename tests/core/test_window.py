@@ -42,7 +42,7 @@ def bar_place(frame: np.ndarray) -> float:
 
 
 def test_the_part_read_is_the_frames_between_start_and_end(tmp_path):
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     path, pixels = moving_video(tmp_path)  # 5 s at 20 fps
     part = read_target_video(path, start_s=1.0, end_s=3.5)
@@ -55,7 +55,7 @@ def test_the_part_read_is_the_frames_between_start_and_end(tmp_path):
 def test_a_part_of_a_long_video_is_read_past_the_memory_budget(tmp_path):
     """A 1080p phone video fills the reading budget in about 11 s: --start beyond that must
     still find its part, not the first seconds or "past the end"."""
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     path, pixels = moving_video(tmp_path)
     budget = 30 * 64 * 64 * 3  # 30 frames
@@ -72,7 +72,7 @@ def test_a_part_of_a_long_video_is_read_past_the_memory_budget(tmp_path):
     ],
 )
 def test_a_part_outside_the_video_is_refused_saying_how_long_it_is(tmp_path, start, end, words):
-    from physinfer.video import read_target_video
+    from physinfer.target import read_target_video
 
     path, _ = moving_video(tmp_path)
     with pytest.raises(UserInputError, match=words) as caught:
@@ -104,3 +104,20 @@ def test_the_note_gives_the_start_and_end_that_leave_the_still_seconds_out(caplo
     hint = note_still_ends(bar_clip(30, 120, 16), None, 2.0)["hint"]
     assert "--start 3.5 leaves them out" in hint and "--end 9.5 leaves them out" in hint
     assert note_still_ends(bar_clip(4, 120, 4), None) is None
+
+
+def test_a_video_longer_than_the_budget_holds_is_read_whole_at_a_smaller_size(tmp_path, monkeypatch, caplog):
+    """At 1920 px a 1080p phone video filled the 2-GiB budget in about 11 s: a pendulum's 25-s
+    swing was measured on its first 11 s. Decoded smaller, all of it is read (a note says so)."""
+    import physinfer.target as target
+
+    path, _ = moving_video(tmp_path)  # 100 frames of 64 × 64
+    monkeypatch.setattr(target, "TARGET_MIN_READ_SIDE", 16)  # the shipped floor is 640 px
+    with caplog.at_level(logging.WARNING):
+        whole = target.read_target_video(path, max_bytes=30 * 64 * 64 * 3)
+    assert whole.n_frames == 100 and max(whole.frames.shape[1:3]) < 64
+    assert "is read at 34×34 (not 64×64) so that its 5.0 s fit in memory" in caplog.text
+    monkeypatch.setattr(target, "TARGET_MIN_READ_SIDE", 60)  # no smaller than that: cut instead
+    with caplog.at_level(logging.WARNING):
+        cut = target.read_target_video(path, max_bytes=30 * 64 * 64 * 3)
+    assert cut.n_frames < 100 and "only its first" in caplog.text
