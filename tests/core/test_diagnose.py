@@ -330,6 +330,9 @@ def _diagnose(tmp_path: Path, target: Path, steps: int, optimizer: str, **kw):
     return run_diagnosis(registry, settings)
 
 
+# Slow (60-90 s on 2 cores): every stage's trials on workers against one process. The default
+# run keeps workers through test_diagnose_screen's screen-and-limits test and the pool test below.
+@pytest.mark.slow
 def test_stages_on_workers_give_the_trials_and_decisions_of_one_process(tmp_path: Path):
     target = _pendulum_target(tmp_path, "quadratic_drag")
     # (Ax's trials were checked the same way by hand: a default pendulum diagnosis, 9 stages.)
