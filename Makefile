@@ -59,10 +59,12 @@ system-deps:
 demo: install
 	$(BIN)/physinfer refine --plugin flag --out runs/demo --overwrite
 
-# Two pytest-xdist workers, each test file on one worker (a module's fixtures built once):
-# about 13-16 min on 2 cores (1,108 tests: 15.8 min on a fresh install, 2026-11-27; 12 min for 1,048 on 2026-11-26). PYTEST_WORKERS=0 runs in-process.
+# Two pytest-xdist workers that take tests from each other's queues when idle (worksteal; a
+# module's fixtures may be built on both): 1,140 tests in 14.5 min on 2 cores, 2026-11-27,
+# where one file per worker (loadfile) took 15.2 min, its longest file finishing alone.
+# PYTEST_WORKERS=0 runs in-process.
 PYTEST_WORKERS ?= 2
-PYTEST_XDIST = $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist loadfile)
+PYTEST_XDIST = $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist worksteal)
 
 test: install
 	$(BIN)/python -m pytest -q -p no:cacheprovider $(PYTEST_XDIST)
