@@ -122,10 +122,7 @@ def note_still_ends(clip: Clip, roi: Box | None, start_s: float = 0.0) -> dict[s
     ``start_s`` of its video) at least :data:`STILL_NOTE_S` long, with the ``--start``/``--end``
     that leaves it out; returns the record (the still seconds at each end and the ``hint``
     said) or ``None``."""
-    if roi is not None:
-        x, y, w, h = (int(round(v)) for v in roi)
-        clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
-    lead, tail = still_ends(clip)
+    lead, tail = still_ends(clip if roi is None else clip.cropped(roi))
     if max(lead, tail) < STILL_NOTE_S:
         return None
     end = start_s + clip.n_frames / clip.fps - tail
@@ -188,8 +185,7 @@ def check_one_subject(clip: Clip, roi: Box | None, fps: float) -> None:
     """
     if roi is not None:
         check_roi(roi, clip.frames.shape[1:3])  # before cropping: an empty region crashed the tracker
-        x, y, w, h = (int(round(v)) for v in roi)
-        clip = Clip(clip.frames[:, max(0, y) : y + h, max(0, x) : x + w], clip.fps)
+        clip = clip.cropped(roi)
     check_one_mover(resample(clip, min(fps, float(clip.fps))))
 
 

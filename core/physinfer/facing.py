@@ -75,11 +75,8 @@ def mirror_roi(roi: Box, width: int) -> Box:
 def read_facing(phenomenon: Any, clip: Clip, roi: Box | None) -> float:
     """The phenomenon's reading of ``clip``'s side, in ``roi`` when given, on its first
     :data:`READ_SECONDS`."""
-    frames = clip.frames[: max(2, int(round(READ_SECONDS * float(clip.fps))))]
-    if roi is not None:
-        x, y, w, h = (int(round(v)) for v in roi)
-        frames = frames[:, max(0, y) : y + h, max(0, x) : x + w]
-    return float(phenomenon.facing(Clip(frames, clip.fps)))
+    first = Clip(clip.frames[: max(2, int(round(READ_SECONDS * float(clip.fps))))], clip.fps)
+    return float(phenomenon.facing(first if roi is None else first.cropped(roi)))
 
 
 def face(phenomenon: Any, clip: Clip, roi: Box | None, asked: bool | None) -> tuple[Clip, Box | None, Facing | None]:

@@ -165,8 +165,6 @@ def check_motion(clip: Clip, path: str | Path) -> None:
         )
 
 
-
-
 def load_target(
     pipeline: Pipeline,
     target_path: Path | None,
@@ -198,16 +196,14 @@ def load_target(
     pipeline.renderer.check_render_params({**defaults, **render_set})  # a typo costs no framing
     start_s, end_s = (conditioning.start_s, conditioning.end_s) if conditioning is not None else (0.0, None)
     clip = read_target_video(target_path, fps=fps, start_s=start_s, end_s=end_s)
+    window = {"start_s": start_s, "end_s": round(start_s + clip.duration, 3), "frames": clip.n_frames}
     estimated: dict[str, Any] = {}
     conditions = None
     if conditioning is not None:
-        clip_read = clip
         clip, estimated, conditions = condition_target(
             pipeline.phenomenon, pipeline.embedder, clip, conditioning, render_set
         )
         if start_s or end_s is not None:  # the part of the video compared
-            seconds = clip_read.n_frames / clip_read.fps
-            window = {"start_s": start_s, "end_s": round(start_s + seconds, 3), "frames": clip_read.n_frames}
             conditions = {"window": window, **conditions}
     zeta = pipeline.renderer.check_render_params({**defaults, **estimated, **render_set})
     return Target(clip, truth_values or None, zeta, str(target_path), conditions)

@@ -139,3 +139,8 @@ class Clip:
     def duration(self) -> float:
         """Duration in seconds."""
         return self.n_frames / self.fps
+
+    def cropped(self, box: tuple[float, float, float, float]) -> Clip:
+        """The clip inside ``box`` = ``(x, y, w, h)`` in its pixels (rounded; clipped at the frame)."""
+        x, y, w, h = (int(round(v)) for v in box)
+        return Clip(self.frames[:, max(0, y) : y + h, max(0, x) : x + w], self.fps)

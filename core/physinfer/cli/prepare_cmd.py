@@ -16,7 +16,15 @@ import typer
 from rich.markup import escape
 
 import physinfer
-from physinfer.cli.app import JsonOpt, MirrorOpt, PluginOpt, emit_json, err_console, handle_errors
+from physinfer.cli.app import (
+    JsonOpt,
+    MirrorOpt,
+    PluginOpt,
+    StartOpt,
+    emit_json,
+    err_console,
+    handle_errors,
+)
 from physinfer.cli.options import options_from_cli
 
 # The options of ``prepare``, declared here so its signature reads as a list of settings.
@@ -61,7 +69,6 @@ _SizeOpt = Annotated[
     int | None,
     typer.Option("--size", help="Side of the square output in pixels (default: the embedder's)."),
 ]
-_StartOpt = Annotated[float, typer.Option("--start", help="Seconds to trim from the start.")]
 _DurationOpt = Annotated[
     float | None,
     typer.Option("--duration", help="Seconds to keep from --start (default: to the end)."),
@@ -96,7 +103,7 @@ def prepare_cmd(
     fps: _FpsOpt = None,
     embedder: _EmbedderOpt = None,
     size: _SizeOpt = None,
-    start: _StartOpt = 0.0,
+    start: StartOpt = 0.0,
     duration: _DurationOpt = None,
     no_stabilise: _NoStabiliseOpt = False,
     no_freeze: _NoFreezeOpt = False,
