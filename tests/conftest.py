@@ -5,6 +5,11 @@ import os
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("PYGLET_HEADLESS", "1")  # pyrender imports pyglet: no X display
 os.environ.setdefault("MPLBACKEND", "Agg")
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # Each of make test's workers has a core: OpenMP and BLAS threads of their own would spin on
+    # the other's (a toy flow's training took 142 s beside a busy worker, 13 s alone).
+    for _threads in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_threads, "1")
 
 
 import json  # noqa: E402

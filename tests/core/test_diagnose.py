@@ -486,7 +486,7 @@ def test_no_effect_is_not_misspecified(tmp_path: Path):
 
 def test_every_stage_proposes_its_trials_in_batches(tmp_path: Path, pendulum_batch_sizes):
     report = _diagnose(tmp_path, _pendulum_target(tmp_path, "quadratic_drag"), steps=5, optimizer="random",
-                       batch_size=2, calibration_runs=1, calibration_control=False)
+                       batch_size=2, calibration_runs=1, calibration_control=False, ridge_starts=False, screen=False)
     assert report["settings"]["batch_size"] == 2
     # Per stage of 5 trials: batches of 2, 2 and a lone trial; the floors' batches hold 4 seeds.
     assert pendulum_batch_sizes.count(2) >= 2 * 3, pendulum_batch_sizes
@@ -506,7 +506,7 @@ def test_a_wide_video_is_framed_before_every_stage(tmp_path: Path):
     from physinfer.conditioning import Conditioning
 
     report = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1, calibration_control=False,
-                       limits=False, conditioning=Conditioning())  # fmt: skip
+                       limits=False, ridge_starts=False, screen=False, conditioning=Conditioning())  # fmt: skip
     prepared = report["target_conditions"]["prepared"]
     assert "skipped" not in prepared, prepared
     x, y, w, h = prepared["box"]
@@ -612,7 +612,8 @@ def test_the_batch_size_is_the_phenomenons_unless_given(tmp_path: Path):
     """The pendulum proposes two trials per GP fit in diagnose (its trials are mostly Ax's
     step), unless --batch-size says otherwise; the report records what ran."""
     target = _pendulum_target(tmp_path, "quadratic_drag")
-    kw = {"steps": 3, "optimizer": "random", "calibrate": False, "limits": False}
+    # Ridge starts and the screen are left out: what is checked is the batch each stage proposes.
+    kw = {"steps": 3, "optimizer": "random", "calibrate": False, "limits": False, "ridge_starts": False, "screen": False}
     default = _diagnose(tmp_path / "default", target, **kw)
     assert default["settings"]["batch_size"] == 2
     one = _diagnose(tmp_path / "one", target, batch_size=1, **kw)

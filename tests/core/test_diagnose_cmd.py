@@ -22,7 +22,7 @@ def test_diagnose_json_then_refine_with_the_model(tmp_path: Path):
     out = tmp_path / "diag"
     proc = _run("diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48",
                 "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video", "--workers", "0",
-                "--no-limits", "--calibration-runs", "1", "--out", str(out), "--json")
+                "--no-limits", "--no-ridge-starts", "--calibration-runs", "1", "--out", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
     assert len(lines) == 1
@@ -56,7 +56,7 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     assert sim.returncode == 0, sim.stderr
     args = ["diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48", "--steps", "8",
             "--effect-steps", "24", "--optimizer", "cma", "--floor-samples", "4", "--calibration-runs", "1",
-            "--threshold", "1000", "--no-video", "--out", str(tmp_path / "diag")]
+            "--threshold", "1000", "--no-video", "--no-ridge-starts", "--out", str(tmp_path / "diag")]
     proc = _run(*args)
     assert proc.returncode == 0, proc.stderr
     report = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
@@ -128,7 +128,7 @@ def test_a_diagnosis_continued_with_other_settings_is_refused_in_diagnose_s_word
     out = tmp_path / "diag"
     args = ["diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48",
             "--steps", "2", "--optimizer", "random", "--floor-samples", "4", "--no-video", "--workers", "0",
-            "--no-limits", "--calibration-runs", "1", "--out", str(out)]
+            "--no-limits", "--no-ridge-starts", "--calibration-runs", "1", "--out", str(out)]
     assert _run(*args).returncode == 0
     proc = _run(*args, "--seed", "5")
     assert proc.returncode == 2

@@ -119,7 +119,8 @@ def _diagnose(out: Path, target: Path, screen: bool, **kw) -> dict:
     from physinfer.discrepancy.settings import DiagnoseSettings
     from physinfer.discrepancy.workflow import run_diagnosis
 
-    kw = {"limits": False, "workers": 1, **kw}
+    # Ridge starts off (tests/core/test_diagnose_ridge.py checks them): they would double each run.
+    kw = {"limits": False, "workers": 1, "ridge_starts": False, **kw}
     settings = DiagnoseSettings(
         plugin="pendulum_jitter", out=out, target_path=target, render_set={"size": 48}, steps=3,
         optimizer="random", floor_samples=4, calibration_runs=1, videos=False,
@@ -158,6 +159,9 @@ def test_a_diagnosis_leaves_out_the_effect_no_fit_could_name(tmp_path: Path, tar
     assert again["screened"] == report["screened"] and again["named_effect"] == report["named_effect"]
 
 
+# Slow (50-65 s on 2 cores): two diagnoses with limits. The default run keeps workers through
+# test_diagnose.py's pool test and the screen through the test above.
+@pytest.mark.slow
 def test_the_screen_and_limits_on_workers_are_those_of_one_process(tmp_path: Path, target: Path):
     """On two workers every clip of the screen's rungs and of the limits' chains is a job of
     its own (physinfer.discrepancy.clip_jobs): the same screen and limits as in one process."""

@@ -337,6 +337,9 @@ def test_refine_killed_once_resumes_to_the_uninterrupted_run(physinfer_cli, tmp_
     kill_and_resume(physinfer_cli, refine_command(steps=4), tmp_path, kills=1, seed=0)
 
 
+# Slow (65-90 s on 2 cores): the default run keeps refine's kill test above and diagnose's resume
+# (test_diagnose.py); the ten seeded kills below kill diagnose too.
+@pytest.mark.slow
 def test_diagnose_killed_once_resumes_to_the_uninterrupted_run(physinfer_cli, tmp_path):
     # Without the detection limits (half the time); the ten-kill test below kills them too.
     kill_and_resume(physinfer_cli, diagnose_command(steps=3, limits=False), tmp_path, kills=1, seed=0)

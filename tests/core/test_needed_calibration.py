@@ -144,6 +144,8 @@ def test_limits_at_the_upper_end_of_a_range_say_so_in_the_verdict_and_on_the_pag
 # ------------------------------------------------------------------ the workflow on the pendulum
 
 
+# Slow (50-80 s on 2 cores): two whole diagnoses. The default run keeps the rule's own tests above.
+@pytest.mark.slow
 def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(tmp_path: Path, monkeypatch):
     from tests.core.test_diagnose import _diagnose, _pendulum_target
 
@@ -156,7 +158,8 @@ def test_a_diagnosis_refining_only_the_needed_runs_decides_as_one_refining_all(t
     monkeypatch.setattr(physinfer.video, "write_video", lambda path, frames, fps=None, **kw: lossy(path, frames, fps, lossless=True))
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
-    kw = {"steps": 3, "optimizer": "random", "limits": True, "workers": 1}
+    # Without ridge starts (their own tests check them): compared is which runs are refined.
+    kw = {"steps": 3, "optimizer": "random", "limits": True, "workers": 1, "ridge_starts": False}
     needed = _diagnose(tmp_path / "needed", target, **kw)
     full = _diagnose(tmp_path / "all", target, calibrate_all=True, **kw)
     for key in ("misspecified", "misspecified_by", "gap_test", "named_effect", "gap_before", "tested_gap"):

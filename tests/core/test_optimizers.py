@@ -8,7 +8,7 @@ def quadratic(x):
     return float(np.sum((np.asarray(x) - 0.4) ** 2))
 
 
-@pytest.mark.parametrize("name,budget", [("ax", 14), ("random", 40), ("cma", 60)])
+@pytest.mark.parametrize("name,budget", [("ax", 9), ("random", 40), ("cma", 60)])
 def test_optimizer_improves_on_the_centre(name, budget):
     registry, _ = load_registry()
     opt = registry.optimizer(name, dim=2, seed=0, names=["a", "b"])

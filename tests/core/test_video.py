@@ -73,7 +73,7 @@ import numpy as np
 from physinfer import video
 if sys.argv[1] == "dirty-heap":  # glibc fills every block malloc hands out with 0xA5 from now on
     ctypes.CDLL("libc.so.6").mallopt(-6, 0x5A)
-clip = video.read_video(sys.argv[2], max_frames=150)
+clip = video.read_video(sys.argv[2], max_frames=60)
 frames = clip.frames.astype(np.float32)
 noisy = np.clip(np.rint(frames + np.random.default_rng(0).normal(0, 2, frames.shape)), 0, 255).astype(np.uint8)
 folder = Path(tempfile.mkdtemp())

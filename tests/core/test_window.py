@@ -121,3 +121,19 @@ def test_a_video_longer_than_the_budget_holds_is_read_whole_at_a_smaller_size(tm
     with caplog.at_level(logging.WARNING):
         cut = target.read_target_video(path, max_bytes=30 * 64 * 64 * 3)
     assert cut.n_frames < 100 and "only its first" in caplog.text
+
+
+def test_prepare_takes_end_as_refine_does_and_refuses_it_beside_duration(tmp_path):
+    """``prepare --end`` keeps the frames ``refine --end`` compares; ``--duration`` says the same."""
+    import physinfer
+
+    video, _ = moving_video(tmp_path, frames=100, fps=20.0)
+    given = {"target": video, "roi": "0,0,64,64", "no_render_estimate": True, "start": 1.0}
+    by_end = physinfer.prepare("pendulum_lab", end=3.5, **given)
+    by_duration = physinfer.prepare("pendulum_lab", duration=2.5, **given)
+    assert by_end.clip.n_frames == by_duration.clip.n_frames
+    np.testing.assert_array_equal(by_end.clip.frames, by_duration.clip.frames)
+    with pytest.raises(UserInputError, match="--end 3.5 and --duration 2.5 both say where the part kept ends"):
+        physinfer.prepare("pendulum_lab", target=video, end=3.5, duration=2.5)
+    with pytest.raises(UserInputError, match="--end 1: give a second of the video after --start"):
+        physinfer.prepare("pendulum_lab", target=video, start=2.0, end=1.0)

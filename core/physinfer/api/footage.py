@@ -13,7 +13,7 @@ from physinfer.api.options import PrepareOptions, RenderOptions, with_settings
 from physinfer.api.plugins import registry
 from physinfer.api.results import frames_figure
 from physinfer.api.values import required
-from physinfer.conditioning import parse_roi
+from physinfer.conditioning import check_window, parse_roi
 from physinfer.errors import UserInputError
 from physinfer.facing import Facing, face
 from physinfer.framing import (
@@ -80,6 +80,21 @@ class PreparedVideo:
         return overlay_figure(self.prepared)
 
 
+def _kept_seconds(start: float, end: float | None, duration: float | None) -> float | None:
+    """The seconds ``prepare`` keeps from ``start``: ``--duration``, or up to ``--end`` (the
+    window ``refine``, ``infer`` and ``diagnose`` take).
+
+    Raises:
+        UserInputError: both given, or a window that is no window (:func:`check_window`).
+    """
+    if end is None:
+        return duration
+    if duration is not None:
+        raise UserInputError(f"--end {end:g} and --duration {duration:g} both say where the part kept ends: give one")
+    check_window(start, end)
+    return end - start
+
+
 def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any) -> PreparedVideo:
     """Find the moving subject in a video, steady the camera, crop it to the renderer's
     framing and resample it to the embedder's frame rate (``physinfer prepare``).
@@ -106,7 +121,7 @@ def prepare(plugin: str, options: PrepareOptions | None = None, **settings: Any)
     # Settings are checked before the embedder (and torch) loads: a typo should cost nothing.
     prepare_settings = PrepareSettings(
         roi=None if roi is None else tuple(float(v) for v in roi),
-        start_s=o.start, duration_s=o.duration, stabilise=not o.no_stabilise,
+        start_s=o.start, duration_s=_kept_seconds(o.start, o.end, o.duration), stabilise=not o.no_stabilise,
         freeze_background=not o.no_freeze, size=o.size or 224,
     )  # fmt: skip
     prepare_settings.validate()

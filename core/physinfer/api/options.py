@@ -356,7 +356,10 @@ class PrepareOptions:
             phenomenon's).
         size: Side of the square output in pixels (``None``: the embedder's).
         start: Seconds trimmed from the start.
-        duration: Seconds kept from ``start`` (``None``: to the end).
+        end: Second of ``target`` at which the part kept ends (``None``: its end), as
+            ``refine``, ``infer`` and ``diagnose`` read ``end``.
+        duration: Seconds kept from ``start`` (``None``: to the end); another way to say
+            ``end`` (giving both is refused).
         no_stabilise: Do not measure or remove camera shake.
         no_freeze: Keep the flicker of pixels that do not move (by default they are set to
             their temporal median, as a renderer draws a static background).
@@ -373,6 +376,7 @@ class PrepareOptions:
     embedder: str | None = None
     size: int | None = None
     start: float = 0.0
+    end: float | None = None
     duration: float | None = None
     no_stabilise: bool = False
     no_freeze: bool = False

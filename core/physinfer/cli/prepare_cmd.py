@@ -17,6 +17,7 @@ from rich.markup import escape
 
 import physinfer
 from physinfer.cli.app import (
+    EndOpt,
     JsonOpt,
     MirrorOpt,
     PluginOpt,
@@ -71,7 +72,7 @@ _SizeOpt = Annotated[
 ]
 _DurationOpt = Annotated[
     float | None,
-    typer.Option("--duration", help="Seconds to keep from --start (default: to the end)."),
+    typer.Option("--duration", help="Seconds to keep from --start (default: to the end; or give --end)."),
 ]
 _NoStabiliseOpt = Annotated[
     bool, typer.Option("--no-stabilise", help="Do not measure or remove camera shake.")
@@ -104,6 +105,7 @@ def prepare_cmd(
     embedder: _EmbedderOpt = None,
     size: _SizeOpt = None,
     start: StartOpt = 0.0,
+    end: EndOpt = None,
     duration: _DurationOpt = None,
     no_stabilise: _NoStabiliseOpt = False,
     no_freeze: _NoFreezeOpt = False,
