@@ -186,7 +186,7 @@ def check_one_subject(clip: Clip, roi: Box | None, fps: float) -> None:
     if roi is not None:
         check_roi(roi, clip.frames.shape[1:3])  # before cropping: an empty region crashed the tracker
         clip = clip.cropped(roi)
-    check_one_mover(resample(clip, min(fps, float(clip.fps))))
+    check_one_mover(resample(clip, min(fps, float(clip.fps))), roi=roi)
 
 
 def outside_frozen(clip: Clip, roi: Box, square: Box) -> Clip:
@@ -248,12 +248,13 @@ def condition_target(
     still = note_still_ends(clip, conditioning.roi, conditioning.start_s)
     if still is not None:
         record["still"] = still
+    if getattr(embedder, "compares_roi_only", False):  # a motion embedder tracks one subject
+        # Before facing: the regions it names are then in the user's video's pixels, not mirrored.
+        check_one_subject(clip, conditioning.roi, float(embedder.fps))
     clip, roi, facing = face(phenomenon, clip, conditioning.roi, conditioning.mirror)  # all below learnt one side
     if facing is not None:
         record["facing"] = facing.to_dict()
         conditioning = replace(conditioning, roi=roi)
-    if getattr(embedder, "compares_roi_only", False):  # a motion embedder tracks one subject
-        check_one_subject(clip, conditioning.roi, float(embedder.fps))
     if conditioning.wants_prepare(clip):
         clip, record["prepared"] = frame_clip(phenomenon, embedder, clip, conditioning.roi)
     elif conditioning.prepare is False:

@@ -195,30 +195,38 @@ def gathered_share(clip: Clip, *, side: int = TRACK_SIDE) -> float:
     return float(np.median(((weight * near).sum(axis=(1, 2)) / safe[:, 0, 0])[found]))
 
 
-def check_one_mover(clip: Clip) -> None:
+def check_one_mover(clip: Clip, *, roi: tuple[float, float, float, float] | None = None) -> None:
     """Refuse a clip in which more than one thing moves (the track would mix them): separate
     moving regions, or moving pixels that lie apart (:func:`gathered_share` below
     :data:`MIN_GATHERED`).
 
+    ``roi``: the region ``(x, y, w, h)`` of the user's video that ``clip`` was cropped to; the
+    boxes are then said in the video's pixels and the advice is a smaller region.
+
     Raises:
         UserInputError: naming each moving region's box and how to pick one (``--roi``).
     """
+    where = "this video" if roi is None else f"--roi {','.join(f'{v:g}' for v in roi)}"
+    advice = (
+        "give the subject's region with --roi x,y,w,h (in the video's pixels)"
+        if roi is None
+        else "give a --roi x,y,w,h around the subject alone (in the video's pixels)"
+    )
     share = gathered_share(clip)
     if share < MIN_GATHERED:
         raise UserInputError(
-            f"more than one thing moves in this video: its moving pixels lie apart (only {100 * share:.0f} % "
-            "near their centre); give the subject's region with --roi x,y,w,h (in the video's pixels)"
+            f"more than one thing moves in {where}: its moving pixels lie apart (only {100 * share:.0f} % "
+            f"near their centre); {advice}"
         )
     regions = moving_regions(clip)
     if len(regions) > 1:
+        x0, y0 = (0, 0) if roi is None else (int(roi[0]), int(roi[1]))
         boxes = "; ".join(
-            f"x,y,w,h {','.join(str(int(v)) for v in r['box'])} ({100 * r['share']:.0f} % of the motion)"
+            f"x,y,w,h {x + x0},{y + y0},{w},{h} ({100 * r['share']:.0f} % of the motion)"
             for r in regions
+            for x, y, w, h in [tuple(int(v) for v in r["box"])]
         )
-        raise UserInputError(
-            f"{len(regions)} things move in this video ({boxes}): give the subject's region with "
-            "--roi x,y,w,h (in the video's pixels)"
-        )
+        raise UserInputError(f"{len(regions)} things move in {where} ({boxes}): {advice}")
 
 
 def half_swings(u: np.ndarray, fps: float) -> tuple[int, float | None]:
