@@ -1,5 +1,5 @@
 """Tests of the ridge starts (physinfer.discrepancy.ridge) and of the ``unnamed`` report
-(physinfer.discrepancy.unnamed), on the bouncing-ball test plugin: quadratic drag and the
+(physinfer.discrepancy.verdict), on the bouncing-ball test plugin: quadratic drag and the
 restitution both take height off each bounce, so the drag model's search from the baseline's
 fit alone stays in the baseline's basin (issue 46).
 """
@@ -19,7 +19,7 @@ from bouncing_ball_plugin import AirDrag, ball_registry, ball_target  # noqa: E4
 
 from physinfer.discrepancy.ridge import effect_paths
 from physinfer.discrepancy.starts import search_starts
-from physinfer.discrepancy.unnamed import LEAD_RATIO, closest_lead, closest_unnamed, search_end
+from physinfer.discrepancy.verdict import LEAD_RATIO, closest_lead, closest_unnamed, search_end
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
 from physinfer.optimizers.random import RandomOptimizer
 from physinfer.parameters import ParameterSpace, ParameterSpec

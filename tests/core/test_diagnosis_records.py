@@ -13,7 +13,7 @@ from physinfer.api.results import Diagnosis
 from physinfer.discrepancy.decide import DecisionRule, final_verdict, misspecification, name_effect
 from physinfer.discrepancy.limit_check import apply_checks, checked_limit
 from physinfer.discrepancy.records import Candidate, Screened, Verdict
-from physinfer.discrepancy.unnamed import closest_lead
+from physinfer.discrepancy.verdict import closest_lead
 
 KEYS = ["effect", "description", "gap", "n_params", "improvement", "ratio", "p_value", "required_ratio",
         "checks", "significant", "best_params", "effect_params", "at_bounds", "distances", "floor", "run_dir"]  # fmt: skip

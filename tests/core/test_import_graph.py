@@ -162,7 +162,6 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.discrepancy.decide": "",
         "physinfer.discrepancy.figures": "",
         "physinfer.discrepancy.gap": "",
-        "physinfer.discrepancy.judge": "",
         "physinfer.discrepancy.ladder": "",
         "physinfer.discrepancy.limit_check": "",
         "physinfer.discrepancy.limit_rule": "",
@@ -181,7 +180,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.discrepancy.settings": "",
         "physinfer.discrepancy.stages": "",
         "physinfer.discrepancy.starts": "",
-        "physinfer.discrepancy.unnamed": "",
+        "physinfer.discrepancy.verdict": "",
     },
     "report": {
         "physinfer.report": "",

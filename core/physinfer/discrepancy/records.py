@@ -1,8 +1,7 @@
 """A diagnosis' records: each candidate effect as judged, each one screened out, and the verdict.
 
-Frozen and typed where the diagnosis builds and reads them (:mod:`~physinfer.discrepancy.judge`
-→ :mod:`~physinfer.discrepancy.decide` → :mod:`~physinfer.discrepancy.unnamed` →
-:mod:`~physinfer.discrepancy.outputs`), made dicts by ``to_dict()`` only where JSON is written:
+Frozen and typed where the diagnosis builds and reads them (:mod:`~physinfer.discrepancy.verdict`
+→ :mod:`~physinfer.discrepancy.decide` → :mod:`~physinfer.discrepancy.outputs`), made dicts by ``to_dict()`` only where JSON is written:
 a :class:`Candidate`'s and a :class:`Screened`'s are ``diagnosis.json``'s ``candidates`` and
 ``screened`` entries key for key, in the same order.
 
@@ -10,7 +9,7 @@ Each record also reads as its dict (``candidate["gap"]`` is ``candidate.gap``; `
 ``keys``, ``{**candidate}`` and ``==`` against a dict work too): code written when these were
 dicts keeps working (only ``json.dumps`` wants ``to_dict()``), and the rules that read a
 candidate (:func:`~physinfer.discrepancy.decide.name_effect`,
-:func:`~physinfer.discrepancy.unnamed.closest_unnamed`, ...) accept either.
+:func:`~physinfer.discrepancy.verdict.closest_unnamed`, ...) accept either.
 """
 
 from __future__ import annotations
@@ -157,7 +156,7 @@ class Screened(_ReadsAsDict):
 class Note(_ReadsAsDict):
     """A note on the verdict: ``named_leaves`` (what the named model still leaves), ``unnamed``
     (misspecified, nothing named: the closest candidate) or ``lead`` (not misspecified, but a
-    candidate took most of the gap) — :mod:`~physinfer.discrepancy.unnamed`,
+    candidate took most of the gap) — :func:`~physinfer.discrepancy.verdict.verdict_notes`,
     :func:`~physinfer.discrepancy.decide.remainder_after_naming`.
 
     Attributes:
@@ -191,8 +190,8 @@ class Verdict(_ReadsAsDict):
     """The decision: is the model misspecified, by which test, and which effect it lacks.
 
     :func:`~physinfer.discrepancy.decide.final_verdict` makes the tests' part;
-    :func:`~physinfer.discrepancy.judge.judge_stages` adds the name and the gaps, the
-    workflow the notes (``named_leaves``, ``unnamed``, ``lead``).
+    :func:`~physinfer.discrepancy.verdict.judge_stages` adds the name and the gaps,
+    :func:`~physinfer.discrepancy.verdict.verdict_notes` the notes (``named_leaves``, ``unnamed``, ``lead``).
 
     Attributes:
         misspecified: Whether either test found the model misspecified.
@@ -207,9 +206,9 @@ class Verdict(_ReadsAsDict):
         named_leaves: What the named model still leaves above the threshold, or ``None``
             (:func:`~physinfer.discrepancy.decide.remainder_after_naming`).
         unnamed: Misspecified and nothing named: the closest candidate, or ``None``
-            (:func:`~physinfer.discrepancy.unnamed.closest_unnamed`).
+            (:func:`~physinfer.discrepancy.verdict.closest_unnamed`).
         lead: Not misspecified, but a candidate took most of the gap, or ``None``
-            (:func:`~physinfer.discrepancy.unnamed.closest_lead`).
+            (:func:`~physinfer.discrepancy.verdict.closest_lead`).
     """
 
     misspecified: bool

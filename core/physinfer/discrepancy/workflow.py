@@ -52,13 +52,12 @@ from physinfer.discrepancy.calibration_stage import (
 )
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import remainder_after_naming, self_consistency_gap
-from physinfer.discrepancy.judge import judge_stages
 from physinfer.discrepancy.limit_check import check_limits, checked_limit
 from physinfer.discrepancy.limit_stage import diagnosis_simulations, run_limits
 from physinfer.discrepancy.outputs import Findings, write_outputs
 from physinfer.discrepancy.parallel import WorkerPool, run_on_workers, scene_registry, stage_jobs
 from physinfer.discrepancy.progress import StageClock
-from physinfer.discrepancy.records import Candidate, Note, Screened, Verdict
+from physinfer.discrepancy.records import Candidate, Screened, Verdict
 from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.screen import refined_already, screen_effects
 from physinfer.discrepancy.stages import (
@@ -70,7 +69,7 @@ from physinfer.discrepancy.stages import (
     effect_stage,
     run_stage,
 )
-from physinfer.discrepancy.unnamed import closest_lead, closest_unnamed, stage_end
+from physinfer.discrepancy.verdict import judge_stages, verdict_notes
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
 from physinfer.io import atomic_write_json
@@ -266,21 +265,15 @@ def _diagnose_stages(
     if remainder is not None:
         say("      " + remainder["message"])
     found, limits, limits_at = _limits(run, found, screened, refined, scale_range)
-    ends = {s.label: stage_end(s, baseline.best_params) for s in stages[1:]}
-    misspecified = found.verdict.misspecified
     clip_seconds = None if limits is None else limits.get("clip_seconds")
-    unnamed = closest_unnamed(
-        found.candidates, ends, misspecified=misspecified, named=found.named, baseline_best=found.before.best_params,
-        effect_steps=run.effect_steps, clip_seconds=clip_seconds, user_video=settings.target_path is not None,
+    verdict, notes = verdict_notes(
+        found.verdict, stages, found.candidates, remainder, baseline_best=baseline.best_params,
+        before_best=found.before.best_params, effect_steps=run.effect_steps, clip_seconds=clip_seconds,
+        user_video=settings.target_path is not None,
     )  # fmt: skip
-    lead = closest_lead(found.candidates, ends, misspecified=misspecified, named=found.named,
-                        effect_steps=run.effect_steps, clip_seconds=clip_seconds,
-                        user_video=settings.target_path is not None)  # fmt: skip
-    for note in (unnamed, lead):
+    for note in (notes["unnamed"], notes["lead"]):
         if note is not None:
             say("      " + note["message"])
-    verdict = dataclasses.replace(found.verdict, named_leaves=Note.from_dict(remainder), unnamed=Note.from_dict(unnamed),
-                                  lead=Note.from_dict(lead))  # fmt: skip
     found = dataclasses.replace(found, verdict=verdict)
     with run.clock.stage("adequacy"):
         adequacy = _chosen_model_adequacy(found, target, settings.seed)
@@ -288,7 +281,7 @@ def _diagnose_stages(
     with run.clock.stage("outputs"):
         report = write_outputs(settings, target, found)
     report["adequacy"] = adequacy
-    report["named_leaves"], report["unnamed"], report["lead"] = remainder, unnamed, lead
+    report.update(notes)  # named_leaves, unnamed, lead
     report["null_scale_range"] = [scale_range[0], scale_range[1] if math.isfinite(scale_range[1]) else None]
     if limits is not None:  # the scale the limits assume, and whether it is the diagnosis' own
         limits = {k: v for k, v in limits.items() if k != "effects"}

@@ -1,32 +1,49 @@
-"""When a model is misspecified and nothing is named: which candidate came closest, whether
-its search ended where it began (a trapped search), and what would settle it.
+"""The verdict of a diagnosis: every candidate judged, the model called misspecified or not,
+an effect named or none, and the notes that say what is left.
 
-A diagnosis that finds the model misspecified but names no effect leaves the user with
-two readings: the missing term is none of the registered effects, or one of them is but its
-search did not find it (an effect that trades off with a base parameter hides along a ridge:
-:mod:`physinfer.discrepancy.ridge`). The report's ``unnamed`` tells them apart as far as the
-diagnosis can: the closest candidate (the smallest gap ratio), the checks it failed, and
-whether its best θ is the baseline's fit with the effect off — its search then never left
-the baseline's basin, and the name is undecided rather than refused. What would settle it is
-said in options: more trials, holding a measured base parameter (the one the effect trades
-off with: the detection limit's ``mimicked_by`` or the largest ``reveal``, else the base
-parameter the effect's search moved most), a longer clip.
+:func:`judge_stages` applies the rules of :mod:`physinfer.discrepancy.decide` to the refined
+stages at one null scale; :mod:`physinfer.discrepancy.workflow` calls it at the scales the
+self-consistency runs leave possible (:mod:`physinfer.discrepancy.needed_calibration`) and at
+the one it reports. :func:`verdict_notes` then adds what a user reads beside the decision:
 
-A model the gap test does not find misspecified can still hold a *lead*
-(:func:`closest_lead`): a candidate whose search switched its effect on and took a large share
-of the gap, but whose improvement stays within the null scale of this clip. On a short clip
-that is how an effect above the documented limit of longer clips shows (the flag's 32° yaw on
-the default 2.4-s clip); the report names the lead and what would settle it, without naming it.
+- *Misspecified and nothing named* (:func:`closest_unnamed`). A diagnosis that finds the
+  model misspecified but names no effect leaves the user with two readings: the missing term
+  is none of the registered effects, or one of them is but its search did not find it (an
+  effect that trades off with a base parameter hides along a ridge:
+  :mod:`physinfer.discrepancy.ridge`). The report's ``unnamed`` tells them apart as far as the
+  diagnosis can: the closest candidate (the smallest gap ratio), the checks it failed, and
+  whether its best θ is the baseline's fit with the effect off — its search then never left
+  the baseline's basin, and the name is undecided rather than refused. What would settle it
+  is said in options: more trials, holding a measured base parameter (the one the effect
+  trades off with: the detection limit's ``mimicked_by`` or the largest ``reveal``, else the
+  base parameter the effect's search moved most), a longer clip.
+- *Not misspecified, but a lead* (:func:`closest_lead`): a candidate whose search switched
+  its effect on and took a large share of the gap, but whose improvement stays within the
+  null scale of this clip. On a short clip that is how an effect above the documented limit
+  of longer clips shows (the flag's 32° yaw on the default 2.4-s clip); the report names the
+  lead and what would settle it, without naming it.
+- *What the named model still leaves* (``named_leaves``,
+  :func:`physinfer.discrepancy.decide.remainder_after_naming`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from physinfer.discrepancy.candidates import warm_start
+from physinfer.discrepancy.decide import (
+    DecisionRule,
+    effect_significance,
+    final_verdict,
+    misspecification,
+    name_effect,
+)
+from physinfer.discrepancy.records import Candidate, Note, Verdict
+from physinfer.discrepancy.stages import Stage
 from physinfer.parameters import ParameterSpace
 
 #: A search "ended at the baseline" when its best θ lies this close to θ̂ with the effect
@@ -44,6 +61,92 @@ _CHECK_WORDS = {
     "beats_null_scale": "its improvement is within the null scale",
     "pays_for_parameters": "its improvement does not pay for its parameters",
 }
+
+
+def judge_stages(
+    stages: list[Stage],
+    before: Stage,
+    tested: float,
+    scale: float,
+    rule: DecisionRule,
+    effect_objs: Mapping[str, Any],
+) -> tuple[list[Candidate], Verdict, str | None]:
+    """Every decision at null scale ``scale``: the candidates' records, the verdict, the named effect."""
+    gap_before = float(before.gap.gap)
+    candidates = [_candidate(stage, before, gap_before, scale, rule, effect_objs[stage.label]) for stage in stages[1:]]
+    # Candidates screened out count in the effect test's divisor: the others' levels do not change.
+    tests = final_verdict(misspecification(tested, scale, rule), candidates, rule, n_candidates=len(effect_objs))
+    named = name_effect(candidates, tests.misspecified)
+    after = next((s for s in stages if s.label == named), before)
+    verdict = dataclasses.replace(tests, named_effect=named, gap_before=gap_before, gap_after=float(after.gap.gap))
+    return candidates, verdict, named
+
+
+def _candidate(stage: Stage, before: Stage, gap_before: float, scale: float, rule: DecisionRule, effect: Any) -> Candidate:
+    """One effect's stage judged against the best baseline fit ``before``."""
+    decision = effect_significance(
+        distances=stage.gap.to_target or [],
+        baseline_distances=before.gap.to_target or [],
+        gap=float(stage.gap.gap),
+        gap_before=gap_before,
+        n_params=stage.n_params,
+        scale=scale,
+        rule=rule,
+    )
+    return Candidate(
+        effect=stage.label,
+        description=effect.description,
+        gap=float(stage.gap.gap),
+        n_params=stage.n_params,
+        **decision,
+        best_params=stage.result.best_params,
+        effect_params={k: stage.result.best_params[k] for k in effect.parameter_space.names},
+        at_bounds=stage.result.place.at_bounds if stage.result.place is not None else {},
+        distances=tuple(stage.gap.to_target or []),
+        floor=stage.gap.floor,
+        run_dir=stage.result.run_dir,
+    )
+
+def verdict_notes(
+    verdict: Verdict,
+    stages: Sequence[Stage],
+    candidates: Sequence[Candidate],
+    remainder: dict[str, Any] | None,
+    *,
+    baseline_best: Mapping[str, float],
+    before_best: Mapping[str, float],
+    effect_steps: int,
+    clip_seconds: float | None,
+    user_video: bool,
+) -> tuple[Verdict, dict[str, dict[str, Any] | None]]:
+    """The verdict with its notes, and the notes as the report writes them.
+
+    Args:
+        verdict: The verdict :func:`judge_stages` returned at the reported null scale.
+        stages: The refined stages (the control first, then each effect's).
+        candidates: The candidates' records (with their detection limits where measured).
+        remainder: What the named model still leaves
+            (:func:`physinfer.discrepancy.decide.remainder_after_naming`).
+        baseline_best: The baseline stage's best fit (where each effect's search started).
+        before_best: The best baseline fit of any stage (the values ``--fix`` would hold).
+        effect_steps: The effect searches' budget.
+        clip_seconds: The clip's length (``None``: not known).
+        user_video: The target is a user's video.
+
+    Returns:
+        The verdict with ``named_leaves``, ``unnamed`` and ``lead`` set, and the same three
+        as records (``None`` where there is none).
+    """
+    ends = {s.label: stage_end(s, baseline_best) for s in stages[1:]}
+    misspecified, named = verdict.misspecified, verdict.named_effect
+    unnamed = closest_unnamed(
+        candidates, ends, misspecified=misspecified, named=named, baseline_best=before_best,
+        effect_steps=effect_steps, clip_seconds=clip_seconds, user_video=user_video,
+    )  # fmt: skip
+    lead = closest_lead(candidates, ends, misspecified=misspecified, named=named, effect_steps=effect_steps,
+                        clip_seconds=clip_seconds, user_video=user_video)  # fmt: skip
+    notes = {"named_leaves": remainder, "unnamed": unnamed, "lead": lead}
+    return dataclasses.replace(verdict, **{key: Note.from_dict(note) for key, note in notes.items()}), notes
 
 
 def search_end(space: ParameterSpace, best: Mapping[str, float], start: Mapping[str, float],
