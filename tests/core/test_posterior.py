@@ -436,6 +436,7 @@ def test_bad_input_to_the_posterior_commands_is_one_clear_error(
     (poisoned / "manifest.jsonl").write_text("\n".join([*rows[:-1], json.dumps(last)]) + "\n")
     cases = {
         ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--target", str(short)): "lasts 1.20 s",
+        ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--target", str(short), "--end", "1"): "measure it with `physinfer refine --plugin pendulum_lab`",
         ("infer", "--plugin", "flag", "--posterior", str(path)): "trained for --plugin pendulum_lab, not flag",
         ("infer", "--plugin", "pendulum_lab", "--posterior", str(path), "--device", "tpu9"): "not a torch device",
         ("infer", "--plugin", "pendulum_lab"): "ships no posterior estimator",

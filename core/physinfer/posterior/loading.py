@@ -210,7 +210,8 @@ def embed_target(estimator: PosteriorEstimator, embedder: Any, clip: Any) -> np.
         raise UserInputError(
             f"the target lasts {clip.duration:.2f} s but the posterior estimator reads {c.embedder_frames} "
             f"frames at {c.embedder_fps:g} fps ({c.embedder_frames / c.embedder_fps:.2f} s); use a longer "
-            "video, or an estimator trained on shorter clips"
+            "video (or a wider --start/--end), an estimator trained on shorter clips, or measure it with "
+            f"`physinfer refine --plugin {c.plugin}`, which searches without an estimator"
         )
     x = np.asarray(embedder.embed(clip), dtype=np.float32)
     if not np.isfinite(x).all():
