@@ -61,8 +61,8 @@ demo: install
 
 # Two pytest-xdist workers that take tests from each other's queues when idle (worksteal; a
 # module's fixtures may be built on both): 1,140 tests in 14.5 and 15.1 min on 2 cores,
-# 2026-11-27, where one file per worker (loadfile) took 15.2 min; 1,139 in 15.6 min on a
-# slower 2-core box, 2026-11-29 (the longest modules sorted first: 16.4 min, not kept).
+# 2026-11-27, where one file per worker (loadfile) took 15.2 min. On a slower 2-core box,
+# 2026-11-29, the same suite took 15.6-16.8 min between runs (16.2 after two trims).
 # PYTEST_WORKERS=0 runs in-process.
 PYTEST_WORKERS ?= 2
 PYTEST_XDIST = $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist worksteal)

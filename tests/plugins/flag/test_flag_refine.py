@@ -71,6 +71,9 @@ def test_colour_640x360_30fps_target_with_truth(tmp_path, cli):
     assert data["ground_truth"] == {"wind_speed": 6.5}
 
 
+# Slow (33 s in make test): the batch solver and embed_many each equal their single runs in
+# test_cloth.py, test_cloth_reproducible.py and test_sdn_frontend.py, which stay in the default run.
+@pytest.mark.slow
 def test_a_batch_of_flags_gives_the_distances_of_single_trials(tmp_path):
     """q = 2 goes through the numba batch solver and embed_many; the distances are the sequential ones."""
     from physinfer.plugins import load_registry
