@@ -221,12 +221,14 @@ def check_one_mover(clip: Clip, *, roi: tuple[float, float, float, float] | None
     regions = moving_regions(clip)
     if len(regions) > 1:
         x0, y0 = (0, 0) if roi is None else (int(roi[0]), int(roi[1]))
-        boxes = "; ".join(
-            f"x,y,w,h {x + x0},{y + y0},{w},{h} ({100 * r['share']:.0f} % of the motion)"
-            for r in regions
-            for x, y, w, h in [tuple(int(v) for v in r["box"])]
-        )
+        boxes = "; ".join(f"x,y,w,h {_box_text(r['box'], x0, y0)} ({100 * r['share']:.0f} % of the motion)" for r in regions)
         raise UserInputError(f"{len(regions)} things move in {where} ({boxes}): {advice}")
+
+
+def _box_text(box: object, x0: int, y0: int) -> str:
+    """``x,y,w,h`` of a region's box moved by ``(x0, y0)`` (a crop's corner in the video)."""
+    x, y, w, h = (int(v) for v in box)  # type: ignore[attr-defined]
+    return f"{x + x0},{y + y0},{w},{h}"
 
 
 def half_swings(u: np.ndarray, fps: float) -> tuple[int, float | None]:

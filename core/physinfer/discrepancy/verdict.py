@@ -107,6 +107,7 @@ def _candidate(stage: Stage, before: Stage, gap_before: float, scale: float, rul
         run_dir=stage.result.run_dir,
     )
 
+
 def verdict_notes(
     verdict: Verdict,
     stages: Sequence[Stage],

@@ -129,7 +129,7 @@ def test_the_real_ball_on_a_string_gives_its_length_within_3_percent(tmp_path):
     video = real_clip("ball_on_string.mp4")
     out = tmp_path / "ball"
     # 12 trials (the default is 24; docs/real-footage.md measures the default): the search
-    # starts where the video's period points (12 gave 0.2612 m, 24 gave 0.2577 m).
+    # starts where the video's period points (2026-11-29: 12 gave 0.2612 m, 24 gave 0.2597 m).
     done = cli("refine", "--plugin", "pendulum", "--target", str(video), "--steps", "12", "--out", str(out), "--json")
     assert done.returncode == 0, done.stderr
     result = json.loads((out / "result.json").read_text())
