@@ -1,18 +1,25 @@
 """Benchmark of ``diagnose`` on an effect that trades off with a base parameter (issue 46).
 
-The test plugin ``bouncing_ball`` (tests/core/bouncing_ball_plugin.py): restitution and drop
-height, and the effect ``ball_drag`` (quadratic drag ``drag_k``), which takes height off each
-bounce as a lower restitution does. For each seed a base θ is drawn (restitution 0.6–0.85,
-height 1.2–1.8 m) and a target is made at each ``--strengths`` value of ``drag_k`` (0: the
-clean target), written to MP4 (64 px), and diagnosed with the phenomenon's defaults
+Two test plugins written as a newcomer writes one (``--case``):
+
+- ``ball`` (tests/core/bouncing_ball_plugin.py): restitution and drop height, and the effect
+  ``ball_drag`` (quadratic drag ``drag_k``), which takes height off each bounce as a lower
+  restitution does; base θ drawn per seed: restitution 0.6–0.85, height 1.2–1.8 m.
+- ``friction`` (tests/core/spring_friction_plugin.py): a block on a spring (frequency,
+  viscous damping, start offset), and the effect ``dry_friction`` (Coulomb friction
+  ``mu_g``), which takes amplitude off as the damping does; base θ drawn per seed:
+  frequency 0.6–1.0 Hz, damping 0.05–0.25 1/s, offset 0.4–0.7 m.
+
+For each seed a target is made at each ``--strengths`` value of the effect's parameter (0:
+the clean target), written to MP4 (64 px), and diagnosed with the phenomenon's defaults
 (``--seed`` = the case's seed, one worker unless ``--workers``). ``--no-ridge-starts``
 diagnoses as before the ridge starts (each effect's search from the baseline fit alone);
 ``--check-limits`` checks each not-named limit with the diagnosis' own stages
 (:mod:`physinfer.discrepancy.limit_check`) — run over a finished ``--out``, the diagnoses
 resume and only the checks run.
 
-Prints one JSON object: ``cases`` (one row each: truth, named, misspecified, the drag
-model's gap ratio and fitted drag, the stated limit ``detectable_from``, wall time),
+Prints one JSON object: ``cases`` (one row each: truth, named, misspecified, the effect
+model's gap ratio and fitted θ, the stated limit ``detectable_from``, wall time),
 ``by_strength`` (named / cases), ``clean_limits`` (each seed's clean target's limit),
 ``half_way`` (the strength named half the time, interpolated linearly between strengths)
 and ``false_discoveries`` (clean targets called misspecified or given a name). Each case's
@@ -22,15 +29,20 @@ Example (docs/benchmarks.md, "Diagnose: effects on a ridge")::
 
     PYOPENGL_PLATFORM=egl nice -n 5 .venv/bin/python benchmarks/bench_diagnose_ridge.py \\
         --seeds 5 --strengths 0 0.1 0.2 0.4 0.8 --out /tmp/bench_ridge
+    PYOPENGL_PLATFORM=egl nice -n 5 .venv/bin/python benchmarks/bench_diagnose_ridge.py --case friction \\
+        --seeds 3 --strengths 0 0.3 0.6 0.9 --out /tmp/bench_ridge_friction
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import statistics
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,45 +51,74 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def truth_of(seed: int, drag: float) -> dict[str, float]:
-    """The target's θ: a seeded base θ, the drag switched in when ``drag > 0``."""
+@dataclass(frozen=True)
+class Case:
+    """A test plugin of tests/core and the effect hidden in its targets."""
+
+    module: str
+    registry: str
+    target: str
+    plugin: str
+    effect: str
+    param: str
+    label: str  # the case folders' name for a strength: seed1-drag0.4
+    base: dict[str, tuple[float, float]]  # each base parameter's range, drawn per seed
+
+    def functions(self) -> tuple[Callable[[], Any], Callable[..., Any]]:
+        """The plugin's registry factory and target maker."""
+        module = importlib.import_module(self.module)
+        return getattr(module, self.registry), getattr(module, self.target)
+
+
+CASES = {
+    "ball": Case("bouncing_ball_plugin", "ball_registry", "ball_target", "bouncing_ball", "ball_drag", "drag_k",
+                 "drag", {"restitution": (0.6, 0.85), "height": (1.2, 1.8)}),
+    "friction": Case("spring_friction_plugin", "friction_registry", "friction_target", "spring_block",
+                     "dry_friction", "mu_g", "mu",
+                     {"freq_hz": (0.6, 1.0), "damping": (0.05, 0.25), "offset": (0.4, 0.7)}),
+}  # fmt: skip
+
+
+def truth_of(case: Case, seed: int, strength: float) -> dict[str, float]:
+    """The target's θ: a seeded base θ, the effect switched in when ``strength > 0``."""
     rng = np.random.default_rng([seed, 46])
-    truth = {"restitution": float(rng.uniform(0.6, 0.85)), "height": float(rng.uniform(1.2, 1.8))}
-    return {**truth, "drag_k": float(drag)} if drag > 0 else truth
+    truth = {name: float(rng.uniform(low, high)) for name, (low, high) in case.base.items()}
+    return {**truth, case.param: float(strength)} if strength > 0 else truth
 
 
-def run_case(out: Path, seed: int, drag: float, args: argparse.Namespace) -> dict[str, Any]:
+def run_case(out: Path, seed: int, strength: float, args: argparse.Namespace) -> dict[str, Any]:
     """Diagnose one target (or read its row back)."""
-    from bouncing_ball_plugin import ball_registry, ball_target
-
     from physinfer.discrepancy.settings import DiagnoseSettings, LimitConfig
     from physinfer.discrepancy.workflow import run_diagnosis
 
-    case = out / f"seed{seed}-drag{drag:g}"
-    row_file = case / ("case-checked.json" if args.check_limits else "case.json")
+    case = CASES[args.case]
+    make_registry, make_target = case.functions()
+    folder = out / f"seed{seed}-{case.label}{strength:g}"
+    row_file = folder / ("case-checked.json" if args.check_limits else "case.json")
     if row_file.is_file():
         return json.loads(row_file.read_text())
-    case.mkdir(parents=True, exist_ok=True)
-    truth = truth_of(seed, drag)
-    target = case / "target.mp4"
+    folder.mkdir(parents=True, exist_ok=True)
+    truth = truth_of(case, seed, strength)
+    target = folder / "target.mp4"
     if not target.is_file():  # a re-run with --check-limits resumes the diagnosis on the same file
-        ball_target(truth, target)
+        make_target(truth, target)
     settings = DiagnoseSettings(
-        plugin="bouncing_ball", out=case / "diagnosis", target_path=Path(target), seed=seed, workers=args.workers,
-        videos=False, ridge_starts=not args.no_ridge_starts, registry_factory=ball_registry,
+        plugin=case.plugin, out=folder / "diagnosis", target_path=Path(target), seed=seed, workers=args.workers,
+        videos=False, ridge_starts=not args.no_ridge_starts, registry_factory=make_registry,
         limit_config=LimitConfig(search_check=args.check_limits),
     )  # fmt: skip
     start = time.perf_counter()
-    report = run_diagnosis(ball_registry(), settings)
-    cand = next((c for c in report["candidates"] if c["effect"] == "ball_drag"), {})
+    report = run_diagnosis(make_registry(), settings)
+    cand = next((c for c in report["candidates"] if c["effect"] == case.effect), {})
     row = {
-        "seed": seed, "drag": drag, "truth": truth, "named": report["named_effect"],
+        "seed": seed, "strength": strength, "truth": truth, "named": report["named_effect"],
         "misspecified": report["misspecified"], "misspecified_by": report["misspecified_by"],
         "gap_before": report["gap_before"], "null_scale": report["null_scale"],
         "gap_ratio": cand.get("ratio"), "significant": cand.get("significant"),
-        "fitted": cand.get("best_params"), "detectable_from": (cand.get("detectable_from") or {}).get("drag_k"),
+        "fitted": cand.get("best_params"), "detectable_from": (cand.get("detectable_from") or {}).get(case.param),
         "limit_reason": (cand.get("limit") or {}).get("reason"), "unnamed": report.get("unnamed"),
-        "local_limit": ((cand.get("limit") or {}).get("local_detectable_from") or {}).get("drag_k"),
+        "lead": report.get("lead"),
+        "local_limit": ((cand.get("limit") or {}).get("local_detectable_from") or {}).get(case.param),
         "wall_s": time.perf_counter() - start,
     }  # fmt: skip
     row_file.write_text(json.dumps(row, indent=1))
@@ -98,28 +139,33 @@ def half_way(by_strength: dict[float, float]) -> float | None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--case", choices=sorted(CASES), default="ball")
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--first-seed", type=int, default=1)
     parser.add_argument("--strengths", type=float, nargs="+", default=[0.0, 0.1, 0.2, 0.4, 0.8])
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--no-ridge-starts", action="store_true")
-    parser.add_argument("--check-limits", action="store_true",
-                        help="diagnose --check-limits (rows in case-checked.json; a case diagnosed without it resumes)")
+    parser.add_argument(
+        "--check-limits",
+        action="store_true",
+        help="diagnose --check-limits (rows in case-checked.json; a case diagnosed without it resumes)",
+    )
     parser.add_argument("--out", type=Path, default=Path("/tmp/bench_diagnose_ridge"))
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT / "tests" / "core"))
     rows = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        for drag in args.strengths:
-            row = run_case(args.out, seed, drag, args)
+        for strength in args.strengths:
+            row = run_case(args.out, seed, strength, args)
             rows.append(row)
-            print(json.dumps({k: row[k] for k in ("seed", "drag", "named", "gap_ratio", "detectable_from")}),
+            print(json.dumps({k: row[k] for k in ("seed", "strength", "named", "gap_ratio", "detectable_from")}),
                   file=sys.stderr)  # fmt: skip
+    effect = CASES[args.case].effect
     by_strength = {}
-    for drag in args.strengths:
-        group = [r for r in rows if r["drag"] == drag]
-        by_strength[drag] = sum(r["named"] == "ball_drag" for r in group) / len(group)
-    clean = [r for r in rows if r["drag"] == 0]
+    for strength in args.strengths:
+        group = [r for r in rows if r["strength"] == strength]
+        by_strength[strength] = sum(r["named"] == effect for r in group) / len(group)
+    clean = [r for r in rows if r["strength"] == 0]
     clean_limits = [r["detectable_from"] for r in clean]
     finite = [v for v in clean_limits if v is not None]
     summary = {
@@ -130,6 +176,7 @@ def main() -> int:
         "half_way": half_way(by_strength),
         "false_discoveries": sum(bool(r["misspecified"] or r["named"]) for r in clean),
         "ridge_starts": not args.no_ridge_starts,
+        "case": args.case,
     }
     print(json.dumps(summary, indent=1))
     return 0

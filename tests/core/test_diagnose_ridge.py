@@ -16,6 +16,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))  # the test plugin beside this file (importlib mode)
 
 from bouncing_ball_plugin import AirDrag, ball_registry, ball_target  # noqa: E402
+from spring_friction_plugin import TRUTH as BLOCK  # noqa: E402
+from spring_friction_plugin import BlockSimulator, DryFriction, friction_registry  # noqa: E402
 
 from physinfer.discrepancy.ridge import effect_paths
 from physinfer.discrepancy.starts import search_starts
@@ -23,6 +25,8 @@ from physinfer.discrepancy.verdict import LEAD_RATIO, closest_lead, closest_unna
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
 from physinfer.optimizers.random import RandomOptimizer
 from physinfer.parameters import ParameterSpace, ParameterSpec
+from physinfer.pipeline import build_pipeline
+from physinfer.testing import check_phenomenon
 
 #: The issue's target: drag 0.8 1/m hidden behind a restitution of 0.8.
 TRUTH = {"restitution": 0.8, "height": 1.5, "drag_k": 0.8}
@@ -227,3 +231,15 @@ def test_a_checked_limit_halves_the_bracket_the_doubling_left():
     # Named at the stated limit: that check alone; named nowhere: the doublings to the far end.
     assert [r["fraction"] for r in bracket_search(search_naming_from(0.01), 0.05)] == [0.05]
     assert [r["fraction"] for r in bracket_search(search_naming_from(2.0), 0.3)] == [0.3, 0.6, 1.0]
+
+
+def test_the_second_ridge_plugin_keeps_the_contracts():
+    """The block on a spring (benchmarks/bench_diagnose_ridge.py --case friction) is a valid
+    plugin: its default target re-simulates exactly, dry friction is off at mu_g = 0, and at
+    a strong friction the block comes to rest while the viscous model's keeps swinging."""
+    registry = friction_registry()
+    embedder = build_pipeline(registry, "spring_block").embedder
+    check_phenomenon(registry.phenomenon("spring_block"), embedder, registry=registry)
+    held = BlockSimulator([DryFriction()]).positions({**BLOCK, "mu_g": 0.6})
+    free = BlockSimulator().positions(BLOCK)
+    assert np.ptp(held[-25:]) < 1e-5 and np.ptp(free[-25:]) > 0.2
