@@ -19,6 +19,7 @@ numpy and scipy only; a 25-s 550×310 phone clip takes about 2 s.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -221,13 +222,15 @@ def check_one_mover(clip: Clip, *, roi: tuple[float, float, float, float] | None
     regions = moving_regions(clip)
     if len(regions) > 1:
         x0, y0 = (0, 0) if roi is None else (int(roi[0]), int(roi[1]))
-        boxes = "; ".join(f"x,y,w,h {_box_text(r['box'], x0, y0)} ({100 * r['share']:.0f} % of the motion)" for r in regions)
+        boxes = "; ".join(
+            f"x,y,w,h {_box_text(r['box'], x0, y0)} ({100 * r['share']:.0f} % of the motion)" for r in regions
+        )
         raise UserInputError(f"{len(regions)} things move in {where} ({boxes}): {advice}")
 
 
-def _box_text(box: object, x0: int, y0: int) -> str:
+def _box_text(box: Sequence[float], x0: int, y0: int) -> str:
     """``x,y,w,h`` of a region's box moved by ``(x0, y0)`` (a crop's corner in the video)."""
-    x, y, w, h = (int(v) for v in box)  # type: ignore[attr-defined]
+    x, y, w, h = (int(v) for v in box)
     return f"{x + x0},{y + y0},{w},{h}"
 
 

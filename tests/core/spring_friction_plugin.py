@@ -82,11 +82,10 @@ class BlockSimulator(Simulator):
         for i in range(n):
             out[i] = x
             for _ in range(per):
-                extra = sum(effect.term((x, v), p, 0.0) for effect in self.effects)
-                held = p.get("mu_g", 0.0) >= w * w * abs(x)
-                if self.effects and abs(v) < 1e-4 and held:
+                if self.effects and abs(v) < 1e-4 and p["mu_g"] >= w * w * abs(x):
                     v = 0.0  # static friction holds the block
                     continue
+                extra = sum(effect.term((x, v), p, 0.0) for effect in self.effects)
                 v += h * (-w * w * x - 2 * c * v + extra)
                 x += h * v
         return out
