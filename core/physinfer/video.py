@@ -402,6 +402,17 @@ def write_video(
     return path
 
 
+def round_trip(clip: Clip, crf: int = 18) -> Clip:
+    """``clip`` written as H.264 at ``crf`` (as :func:`write_video` writes a target) and read
+    back: what a clip looks like once it has been a file. A temporary file, deleted at once."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="physinfer-round-trip-") as folder:
+        back = read_video(write_video(Path(folder) / "clip.mp4", clip, crf=crf), fps=clip.fps)
+    height, width = np.asarray(clip.frames).shape[1:3]
+    return Clip(back.frames[: len(clip.frames), :height, :width], clip.fps)
+
+
 def _write_pyav(path: Path, frames: np.ndarray, fps: float, lossless: bool = False, crf: int = 18) -> None:
     from fractions import Fraction
 

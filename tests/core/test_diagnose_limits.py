@@ -313,7 +313,9 @@ def test_an_effect_the_base_parameters_mimic_is_reported_as_mimicked(pendulum):
     top = mimic["rungs"][-1]
     assert top["shift"] > 3 * mimic["threshold"] > 3 * top["refit_gap"]  # visible, yet reproduced
     assert top["measured"] and top["refit_step"]["damping"] > 0.5  # the refit turned the damping up
-    assert result["simulations"] <= 40  # 3 Jacobian points, 4 rungs, their refits
+    # 2 × 2 Jacobian points (the ladder's step and the polish's finer one), 4 rungs, their refits
+    # from both (58 measured)
+    assert result["simulations"] <= 64
 
 
 def test_an_effect_hidden_by_its_own_randomness_has_no_limit(pendulum):

@@ -17,12 +17,23 @@ sys.path.insert(0, str(Path(__file__).parent))  # the test plugin beside this fi
 
 from bouncing_ball_plugin import AirDrag, ball_registry, ball_target  # noqa: E402
 from spring_friction_plugin import TRUTH as BLOCK  # noqa: E402
-from spring_friction_plugin import BlockSimulator, DryFriction, friction_registry  # noqa: E402
+from spring_friction_plugin import (  # noqa: E402
+    BlockSimulator,
+    DryFriction,
+    friction_registry,
+    friction_target,
+)
 
+from physinfer import video
+from physinfer.discrepancy.candidates import augmented_pipeline
+from physinfer.discrepancy.ladder import Probe
+from physinfer.discrepancy.refit import polished_start
 from physinfer.discrepancy.ridge import effect_paths
+from physinfer.discrepancy.stages import deterministic
 from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.verdict import LEAD_RATIO, closest_lead, closest_unnamed, search_end
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
+from physinfer.evaluation import squared_distance
 from physinfer.optimizers.random import RandomOptimizer
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.pipeline import build_pipeline
@@ -243,3 +254,63 @@ def test_the_second_ridge_plugin_keeps_the_contracts():
     held = BlockSimulator([DryFriction()]).positions({**BLOCK, "mu_g": 0.6})
     free = BlockSimulator().positions(BLOCK)
     assert np.ptp(held[-25:]) < 1e-5 and np.ptp(free[-25:]) > 0.2
+
+
+def test_a_polished_start_refits_the_base_to_the_target_and_is_kept(tmp_path: Path):
+    """A control's polished start (deterministic phenomena): from a fit off by a few percent
+    the Gauss–Newton refit lands closer to the target than the fit; it is kept in the stage's
+    folder and read back; at the truth itself there is nothing to polish."""
+    registry = friction_registry()
+    base = build_pipeline(registry, "spring_block")
+    goal = np.asarray(base.embedder.embed(friction_target(BLOCK)))
+    off = {"freq_hz": 0.78, "damping": 0.19, "offset": 0.57}
+    found = polished_start(base, {"size": 64}, off, goal, (0,), {}, tmp_path / "control")
+    assert found is not None and abs(found["freq_hz"] - 0.8) < abs(off["freq_hz"] - 0.8)
+    stored = json.loads((tmp_path / "control" / "polish.json").read_text())
+    before = squared_distance(goal, base.embedder.embed(friction_target(off)))
+    assert stored["start"] == found and stored["distance"] < 0.5 * before
+    assert polished_start(base, {"size": 64}, off, goal, (0,), {}, tmp_path / "control") == found
+    assert polished_start(base, {"size": 64}, BLOCK, goal, (0,), {}, tmp_path / "exact") is None
+
+
+def test_only_a_deterministic_baseline_polishes_its_controls(tmp_path: Path):
+    """The baseline's gap record decides: a noise floor of 0 polishes, any other none."""
+    for floor, expected in ((0.0, True), (0.3, False)):
+        out = tmp_path / str(floor)
+        (out / "baseline").mkdir(parents=True)
+        (out / "baseline" / "gap.json").write_text(json.dumps({"key": {}, "summary": {"floor": floor}}))
+        assert deterministic(out) is expected
+    assert deterministic(tmp_path / "no-baseline-yet") is False
+
+
+def test_a_polished_start_moves_the_effect_with_the_base(tmp_path: Path):
+    """An effect's search is polished alike (base and effect parameters together): from the
+    baseline's fit with the friction half what made the target, the refit lands closer to the
+    target than its start, and moves the friction (to about what made the target) with the base."""
+    registry = friction_registry()
+    base = build_pipeline(registry, "spring_block")
+    augmented = augmented_pipeline(base, [DryFriction()])
+    truth = {**BLOCK, "mu_g": 0.6}
+    goal = np.asarray(base.embedder.embed(friction_target(truth)))
+    start = {**BLOCK, "damping": 0.2, "mu_g": 0.3}
+    found = polished_start(augmented, {"size": 64}, start, goal, (0,), {}, tmp_path / "effect")
+    assert found is not None and abs(found["mu_g"] - 0.6) < 0.05  # 0.595 measured
+    before = squared_distance(goal, base.embedder.embed(friction_target(start)))
+    after = squared_distance(goal, base.embedder.embed(friction_target(found)))
+    assert after < 0.05 * before  # 0.97 -> 8e-5 measured
+
+
+def test_a_rung_standing_for_a_file_makes_the_round_trip_through_the_encoder():
+    """A deterministic baseline's ladder, for a target read from a file, embeds each rung as
+    the file's clip would look (H.264 and back), not as rendered: the codec's distance is the
+    floor of every gap measured against such a target (0.51 on the ball at the drag's off)."""
+    base = build_pipeline(ball_registry(), "bouncing_ball")
+    clean = {"restitution": 0.8, "height": 1.5}
+    probe = Probe(base, {"size": 64})
+    encoded, _ = probe.encoded_clips(base, [clean], [0])
+    rendered, _ = probe.clips(base, [clean], [0])
+    clip = ball_target(clean)
+    expected = squared_distance(base.embedder.embed(video.round_trip(clip)), base.embedder.embed(clip))
+    assert expected > 0.05
+    assert squared_distance(encoded[0], rendered[0]) == pytest.approx(expected)
+    assert video.round_trip(clip).frames.shape == np.asarray(clip.frames).shape[:3] + (3,)

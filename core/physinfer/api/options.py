@@ -203,7 +203,8 @@ class DiagnoseOptions(ModelOptions, TargetOptions, FootageOptions, SearchOptions
         check_limits: Check each not-named limit with this search (:mod:`~physinfer.discrepancy.limit_check`).
         screen: Leave out, before refining them, the candidates whose signature no fit could
             name on this target (:mod:`physinfer.discrepancy.screen`); ``False``: refine all.
-        ridge_starts: Start each effect's search along its ridge too (:mod:`~physinfer.discrepancy.ridge`).
+        ridge_starts: Start each effect's search along its ridge too (:mod:`~physinfer.discrepancy.ridge`),
+            and, for a deterministic phenomenon, every control's and effect's search from its start polished.
         workers: Local worker processes running the stages after the baseline side by side
             (``None``: one per CPU; 0 or 1: in this process).
         scheduler: A Dask scheduler address whose workers run those stages.

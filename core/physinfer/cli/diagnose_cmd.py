@@ -146,7 +146,8 @@ _RidgeStartsOpt = Annotated[
     typer.Option(
         "--ridge-starts/--no-ridge-starts",
         help="Start each effect's search also where the video points along the ridge it shares with the "
-        "base parameters (drag vs restitution), not only at the baseline's fit.",
+        "base parameters (drag vs restitution), not only at the baseline's fit; for a deterministic "
+        "phenomenon also polish every search's start (controls and effects) towards its target.",
     ),
 ]
 _WorkersOpt = Annotated[

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from physinfer import video
 from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.ladder import Probe, ProbeFactory, stack_rows
 from physinfer.discrepancy.parallel import WorkerPool, worker_pipeline
@@ -53,6 +54,8 @@ class ClipJob:
         seed: The simulation seed.
         keep_trajectory: Send the trajectory back too (another view's what-if re-renders it).
         as_embedded: Send the embedding back as the embedder gave it (else as float64).
+        encoded: Send the clip through the video encoder and back before it is embedded
+            (:meth:`~physinfer.discrepancy.ladder.Probe.encoded_clips`).
     """
 
     settings: DiagnoseSettings
@@ -62,6 +65,7 @@ class ClipJob:
     seed: int
     keep_trajectory: bool = False
     as_embedded: bool = False
+    encoded: bool = False
 
 
 def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
@@ -74,6 +78,7 @@ def run_clip_job(job: ClipJob) -> tuple[np.ndarray | None, Any, float | None]:
         return None, None, None
     with torch_threads(refinement_torch_threads()):
         clip = base.renderer.render(trajectory, job.render_params)
+        clip = video.round_trip(clip) if job.encoded else clip
         embedding = np.asarray(base.embedder.embed(clip), dtype=None if job.as_embedded else np.float64)
     return embedding, trajectory if job.keep_trajectory else None, trajectory.duration
 
@@ -120,14 +125,27 @@ class PooledProbe(Probe):
         self, model: Pipeline, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
     ) -> tuple[np.ndarray, list[Any]]:
         """As :meth:`Probe.clips`, on the workers; a job that fails there raises here."""
+        return self._on_workers(model, params, seeds, encoded=False)
+
+    def encoded_clips(
+        self, model: Pipeline, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+    ) -> tuple[np.ndarray, list[Any]]:
+        """As :meth:`Probe.encoded_clips`, on the workers (this process' threads must not
+        render: an OpenGL context made current in one stays bound to it)."""
+        return self._on_workers(model, params, seeds, encoded=True)
+
+    def _on_workers(
+        self, model: Pipeline, params: Sequence[Mapping[str, float]], seeds: Sequence[int], *, encoded: bool
+    ) -> tuple[np.ndarray, list[Any]]:
         effects = tuple(effect.name for effect in model.effects)
         futures = [
             self.executor.submit(
                 run_clip_job,
-                ClipJob(self.settings, self.render_params, effects, dict(p), int(s), self.keep_trajectories),
+                ClipJob(self.settings, self.render_params, effects, dict(p), int(s), self.keep_trajectories,
+                        encoded=encoded),
             )
             for p, s in zip(params, seeds, strict=True)
-        ]
+        ]  # fmt: skip
         results = [future.result() for future in futures]
         self.simulations += len(params)
         if self.clip_seconds is None:

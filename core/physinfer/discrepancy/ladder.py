@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from physinfer import video
 from physinfer.discrepancy.decide import DecisionRule
 from physinfer.evaluation import Pipeline, simulate_many, squared_distance
 from physinfer.noise import noise_seeds
@@ -115,6 +116,25 @@ class Probe:
             ]
         )
 
+    def encoded_clips(
+        self, model: Pipeline, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+    ) -> tuple[np.ndarray, list[Any]]:
+        """As :meth:`clips`, here, each clip through the video encoder and back before it is
+        embedded (:func:`physinfer.video.round_trip`): a rung that stands for a target read
+        from a file."""
+        trajectories = self.trajectories(model.simulator, params, seeds)
+        embedder = self.base.embedder
+        rows = [
+            None
+            if traj is None
+            else np.asarray(
+                embedder.embed(video.round_trip(self.base.renderer.render(traj, self.render_params))),
+                dtype=np.float64,
+            )
+            for traj in trajectories
+        ]
+        return stack_rows(rows), trajectories
+
 
 #: Makes a probe whose clips run on the diagnosis' workers, one job per clip
 #: (:class:`~physinfer.discrepancy.clip_jobs.PooledProbe`); its argument: keep the trajectories.
@@ -140,6 +160,9 @@ class LimitInputs:
         diagnosis_simulations: Simulations the diagnosis cost (for the budget).
         n_candidates: Candidates the rule counts when some are not in ``augmented`` (screened
             out: :mod:`physinfer.discrepancy.screen`); ``None``: those in ``augmented``.
+        encoded: The target came from a file: a deterministic baseline's rungs make the round
+            trip through the video encoder that a self-consistency target makes, since the
+            codec's distance is then the floor of every gap the diagnosis measures.
         make_longer: ``None``, or a factory that, given the current clip's seconds, returns
             ``(base simulator, {effect: simulator}, embedder)`` recording twice as long (the
             longer-clip what-if); it raises :class:`UserInputError` where the phenomenon
@@ -158,6 +181,7 @@ class LimitInputs:
     diagnosis_simulations: int
     make_longer: Callable[[float], tuple[Any, dict[str, Any], Any]] | None = None
     scale_low: float | None = None
+    encoded: bool = False
     n_candidates: int | None = None
 
     @property
@@ -213,12 +237,15 @@ def run_ladder(
     effect_space: ParameterSpace,
     fractions: Sequence[float],
     seeds: Sequence[int],
+    encoded: bool = False,
 ) -> Ladder:
-    """Simulate every rung under ``seeds`` in one batch."""
+    """Simulate every rung under ``seeds`` in one batch (``encoded``: each clip through the
+    video encoder and back, here: :meth:`Probe.encoded_clips`)."""
     moved, held = strength_path(effect_space)
     values = [values_at(effect_space, moved, held, f) for f in fractions]
     jobs = [{**theta, **v} for v in values for _ in seeds]
-    embeddings, trajs = probe.clips(augmented, jobs, list(seeds) * len(values))
+    clips = probe.encoded_clips if encoded else probe.clips
+    embeddings, trajs = clips(augmented, jobs, list(seeds) * len(values))
     n = len(seeds)
     rungs = range(len(values))
     return Ladder(list(fractions), values, [embeddings[i * n : (i + 1) * n] for i in rungs],

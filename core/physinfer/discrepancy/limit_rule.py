@@ -37,16 +37,25 @@ from physinfer.discrepancy.ladder import (
     pairwise,
     pairwise_median,
 )
-from physinfer.discrepancy.refit import RefitState, measured_refit, movers, predicted_refit
+from physinfer.discrepancy.refit import (
+    RefitState,
+    linear_refit,
+    measured_refit,
+    movers,
+    predicted_refit,
+)
 from physinfer.parameters import ParameterSpace
+
+_Snapshot = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 @dataclass
 class RefitLog:
     """The measured refits of one :func:`effect_limit` call, in order: ``(rung, gap, u, and
-    the state it left: jac, u, emb)`` — what a second reading of the same ladder replays."""
+    the states they left: (jac, u, emb), and the fine refit's or None)`` — what a second
+    reading of the same ladder replays."""
 
-    entries: list[tuple[int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    entries: list[tuple[int, float, np.ndarray, _Snapshot, _Snapshot | None]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -156,6 +165,7 @@ def effect_limit(
     measure: str,
     keep: Sequence[bool] | None = None,
     refits: RefitLog | None = None,
+    fine_jac: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """The detection limit of one effect from its ladder.
 
@@ -176,6 +186,9 @@ def effect_limit(
             the rungs in the order that one did, its refits are taken from it instead of
             simulated again — exactly what they would be, since a refit depends only on the
             rung and the state the earlier ones left. This call's own are appended.
+        fine_jac: A second Jacobian at θ̂ (a finer step, a deterministic baseline's): each
+            measured refit is made from both and the better kept, as the diagnosis' searches
+            are polished with that step (:func:`physinfer.discrepancy.refit.polished_start`).
 
     Returns:
         ``detectable_from``, ``fraction``, ``reason``, ``mimicked_by``, ``rungs`` (each with
@@ -185,9 +198,10 @@ def effect_limit(
     u0 = space.to_unit(space.complete(theta))
     floor_gap = pairwise_median(base_embeddings)
     rungs = _predicted_rungs(ladder, base_embeddings, jac, u0, keep, threshold, floor_gap)
+    fine = None if fine_jac is None else RefitState(fine_jac.copy(), u0, base_embeddings)
     refitter = _Refitter(
         probe, ladder, rungs, RefitState(jac.copy(), u0, base_embeddings), u0, base_embeddings, seeds,
-        mode=measure, keep=keep, log=refits,
+        mode=measure, keep=keep, log=refits, fine=fine,
     )  # fmt: skip
     order = range(len(rungs)) if measure == "all" else [len(rungs) - 1]
     for i in order:
@@ -255,6 +269,7 @@ class _Refitter:
 
     Attributes:
         mode: ``"all"``, ``"key"`` or ``"none"`` (nothing is measured).
+        fine: The state of a second refit from a finer Jacobian (``None``: none).
         done: The rungs measured, in order.
     """
 
@@ -268,6 +283,7 @@ class _Refitter:
     mode: str
     keep: Sequence[bool] | None = None
     log: RefitLog | None = None
+    fine: RefitState | None = None
     done: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -283,21 +299,39 @@ class _Refitter:
             return
         k, done, replay = len(self.done), self.done, self._replay
         if k < len(replay) and replay[k][0] == i and [e[0] for e in replay[:k]] == done:
-            _, gap, u, jac_after, u_after, emb_after = replay[k]
-            self.state.jac, self.state.u, self.state.emb = jac_after.copy(), u_after, emb_after
+            _, gap, u, coarse, fine = replay[k]
+            _restore(self.state, coarse)
+            if self.fine is not None and fine is not None:
+                _restore(self.fine, fine)
         else:
-            gap, u = measured_refit(
-                self.probe, self.ladder.embeddings[i], self.state, (self.u0, self.base_embeddings), r["delta"],
-                self.seeds, multipliers=self._multipliers, polish=self._polish, keep=self.keep,
-            )  # fmt: skip
+            gap, u = self._refit(i, self.state, r["delta"])
+            if self.fine is not None:
+                shift = np.nanmean(self.ladder.embeddings[i], axis=0) - np.nanmean(self.base_embeddings, axis=0)
+                fine_gap, fine_u = self._refit(i, self.fine, linear_refit(self.fine.jac, shift, self.u0, self.keep))
+                gap, u = (fine_gap, fine_u) if fine_gap < gap else (gap, u)
             if self.log is not None and [e[0] for e in self.log.entries] == done:
-                self.log.entries.append((i, gap, u, self.state.jac.copy(), self.state.u, self.state.emb))
+                fine = None if self.fine is None else _snapshot(self.fine)
+                self.log.entries.append((i, gap, u, _snapshot(self.state), fine))
         done.append(i)
         if gap < r["shift"]:
             r.update(refit_gap=gap, delta=u - self.u0)
         else:
             r.update(refit_gap=r["shift"], delta=np.zeros_like(self.u0))
         r["measured"] = True
+
+    def _refit(self, i: int, state: RefitState, delta: np.ndarray) -> tuple[float, np.ndarray]:
+        return measured_refit(
+            self.probe, self.ladder.embeddings[i], state, (self.u0, self.base_embeddings), delta,
+            self.seeds, multipliers=self._multipliers, polish=self._polish, keep=self.keep,
+        )  # fmt: skip
+
+
+def _snapshot(state: RefitState) -> _Snapshot:
+    return state.jac.copy(), state.u, state.emb
+
+
+def _restore(state: RefitState, snapshot: _Snapshot) -> None:
+    state.jac, state.u, state.emb = snapshot[0].copy(), snapshot[1], snapshot[2]
 
 
 def _settled_limit(

@@ -108,6 +108,7 @@ def run_limits(
         make_longer=functools.partial(_longer_models, registry, settings, base, effect_objs, fixed),
         scale_low=scale_low,
         n_candidates=n_candidates,
+        encoded=settings.target_path is not None,
     )
     pooled = pooled_probes(pool, base, target.render_params)
     if pooled is not None:

@@ -51,7 +51,7 @@ from physinfer.discrepancy.clip_jobs import concurrently
 from physinfer.discrepancy.ladder import Ladder, Probe, ladder_seeds, pairwise_median, run_ladder
 from physinfer.discrepancy.limit_rule import RefitLog, Threshold, effect_limit
 from physinfer.discrepancy.limit_text import summary_phrase
-from physinfer.discrepancy.refit import jacobian
+from physinfer.discrepancy.refit import POLISH_JACOBIAN_STEP, jacobian
 from physinfer.discrepancy.reveal import reveal_by_fixing, reveal_by_setting
 from physinfer.evaluation import Pipeline
 from physinfer.moved import moved_names
@@ -106,6 +106,8 @@ class EffectTask:
         deterministic: One clip per rung, every rung's refit measured.
         threshold_low: The threshold at the lower end of the null scale's range, where the
             diagnosis knows its null scale only as a range (``None``: it knows it).
+        fine_jac: A deterministic baseline's Jacobian at the polish's finer step (``None``: none).
+        encoded: Each rung through the video encoder and back (:attr:`LimitInputs.encoded`).
     """
 
     name: str
@@ -118,22 +120,24 @@ class EffectTask:
     refit_seeds: tuple[int, ...]
     deterministic: bool
     threshold_low: Threshold | None = None
+    fine_jac: np.ndarray | None = None
+    encoded: bool = False
 
 
 def effect_ladder(probe: Probe, augmented: Pipeline, task: EffectTask) -> tuple[dict[str, Any], Ladder]:
     """Run ``task`` with ``probe`` and the effect's ``augmented`` pipeline: its limit record and ladder."""
     effect_space = augmented.effects[0].parameter_space
-    ladder = run_ladder(probe, augmented, task.theta, effect_space, task.fractions, task.seeds)
+    ladder = run_ladder(probe, augmented, task.theta, effect_space, task.fractions, task.seeds, task.encoded)
     common = (probe, ladder, task.theta, task.base_embeddings, task.jac, task.threshold, list(task.refit_seeds))
     measure = "all" if task.deterministic else "key"
     refits = RefitLog()
-    limit = effect_limit(*common, effect_space=effect_space, measure=measure, refits=refits)
+    limit = effect_limit(*common, effect_space=effect_space, measure=measure, refits=refits, fine_jac=task.fine_jac)
     limit["threshold"] = task.threshold.at()
     if task.threshold_low is not None and task.threshold_low != task.threshold:
         # The same rungs read at the range's lower end: the limit with every run refined lies
         # between. The refits both readings measure in the same order are measured once.
         low = effect_limit(*common[:5], task.threshold_low, *common[6:], effect_space=effect_space, measure=measure,
-                           refits=refits)  # fmt: skip
+                           refits=refits, fine_jac=task.fine_jac)  # fmt: skip
         limit["at_lower_scale"] = {
             "detectable_from": low["detectable_from"], "reason": low["reason"], "threshold": task.threshold_low.at(),
         }  # fmt: skip
@@ -170,11 +174,18 @@ def detection_limits(
     theta = {k: float(v) for k, v in space.complete(inputs.theta).items()}
     keep = config.reveal  # another view's what-if re-renders the clips
     jac, jac_trajs, seconds = _shared_jacobian(probe, pooled, keep, theta, base_emb, refit_seeds, config.step, say)
+    # A deterministic baseline's searches are polished with a finer step (refit.polished_start):
+    # refits from that Jacobian too, or the limits promise what no search names; and its gaps
+    # are the codec's distance when nothing else is, so its rungs are encoded as the target was
+    # (a chaotic one's floor dwarfs the codec's: its rungs stay in memory). docs/benchmarks.md.
+    fine_jac = None
+    if deterministic:
+        fine_jac = _shared_jacobian(probe, pooled, False, theta, base_emb, refit_seeds, POLISH_JACOBIAN_STEP, say)[0]
     thresholds = _thresholds_at(inputs, inputs.scale)
     low = _thresholds_at(inputs, inputs.scale_low) if inputs.scale_low is not None else {}
     tasks = [
         EffectTask(name, theta, base_emb, jac, thresholds[name], tuple(config.fractions), tuple(seeds),
-                   tuple(refit_seeds), deterministic, low.get(name))  # fmt: skip
+                   tuple(refit_seeds), deterministic, low.get(name), fine_jac, deterministic and inputs.encoded)  # fmt: skip
         for name in inputs.augmented
     ]
     results = _run_ladders(probe, inputs, tasks, pooled, keep, say)

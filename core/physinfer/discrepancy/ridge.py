@@ -37,9 +37,15 @@ import numpy as np
 from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.clip_jobs import pooled_probes
 from physinfer.discrepancy.ladder import Probe, strength_path, values_at
-from physinfer.discrepancy.refit import RefitState, jacobian, linear_refit
+from physinfer.discrepancy.refit import (
+    MULTIPLIERS,
+    POLISH,
+    RefitState,
+    distance_to,
+    jacobian,
+    refit_to_target,
+)
 from physinfer.discrepancy.starts import RIDGE_FILE
-from physinfer.evaluation import squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
@@ -56,16 +62,11 @@ Log = Callable[[str], None]
 #: signed effect, probed both ways, has two each way.
 FRACTIONS = (0.125, 0.25, 0.5, 1.0)
 SIGNED_FRACTIONS = (0.5, 1.0)
-#: Lengths of the linear refit's step tried from each strength's rung (the embedding
-#: saturates: on the ball the linear step went a third of the way to the ridge).
-MULTIPLIERS = (1.0, 2.0, 4.0)
 #: Rounds that halve the bracket of strengths around the closest point found (a weak
 #: effect's ridge point lies between θ̂ and the first rung: on the ball a drag of 0.1 1/m
 #: against rungs from 0.19), for a deterministic phenomenon only: a chaotic one's single
 #: clips are too noisy to tell neighbouring strengths apart, and its clips cost more.
 REFINE_ROUNDS = 2
-#: Gauss–Newton steps after the line search, per strength.
-POLISH = 2
 #: Jacobian step in normalised units (the detection ladder's).
 JACOBIAN_STEP = 0.4
 
@@ -80,55 +81,9 @@ def effect_paths(space: ParameterSpace) -> list[tuple[dict[str, tuple[float, flo
     return paths
 
 
-def _distance(goal: np.ndarray, embeddings: np.ndarray) -> float:
-    rows = embeddings[np.isfinite(embeddings).all(axis=1)]
-    return float(np.median([squared_distance(goal, r) for r in rows])) if len(rows) else float("inf")
-
-
 def probe_seeds(seed: int, n: int) -> list[int]:
     """Seeds of the ridge probe, apart from the trials', the gaps' and the ladder's."""
     return noise_seeds(seed + 13, n, salt=0x21D6E)
-
-
-def _refit_to_target(
-    probe: Probe,
-    model: Pipeline,
-    space: ParameterSpace,
-    effect_values: Mapping[str, float],
-    goal: np.ndarray,
-    state: RefitState,
-    u0: np.ndarray,
-    seeds: Sequence[int],
-    keep: np.ndarray,
-) -> list[tuple[np.ndarray, float]]:
-    """The base parameters refit to ``goal`` with the effect held at ``effect_values``: every
-    point visited (normalised base coordinates) and its distance to the target."""
-    visited: list[tuple[np.ndarray, np.ndarray, float]] = []
-
-    def visit(u: np.ndarray, origin: tuple[np.ndarray, np.ndarray] | None) -> bool:
-        if any(np.max(np.abs(u - p)) < 1e-3 for p, _, _ in visited):
-            return False
-        emb, _ = probe.clips(model, [{**space.from_unit(u), **effect_values}] * len(seeds), seeds)
-        if origin is not None:
-            state.broyden(u - origin[0], np.nanmean(emb, axis=0) - np.nanmean(origin[1], axis=0))
-        visited.append((u, emb, _distance(goal, emb)))
-        return True
-
-    starts = [u0] if np.allclose(state.u, u0) else [u0, state.u]
-    for u in starts:  # the rung at θ̂, and at the previous strength's refit (a continuation)
-        visit(u, None)
-    first = min(visited, key=lambda v: v[2])
-    delta = linear_refit(state.jac, goal - np.nanmean(first[1], axis=0), first[0], keep)
-    for t in MULTIPLIERS:
-        visit(np.clip(first[0] + t * delta, -1.0, 1.0), (first[0], first[1]))
-    for _ in range(POLISH):
-        best = min(visited, key=lambda v: v[2])
-        step = linear_refit(state.jac, goal - np.nanmean(best[1], axis=0), best[0], keep)
-        if not visit(np.clip(best[0] + step, -1.0, 1.0), (best[0], best[1])):
-            break
-    best = min(visited, key=lambda v: v[2])
-    state.u, state.emb = best[0], best[1]
-    return [(u, d) for u, _, d in visited]
 
 
 def _probe_path(
@@ -154,7 +109,7 @@ def _probe_path(
 
     def at(fraction: float) -> None:
         values = values_at(effect_space, moved, held, fraction)
-        visited = _refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
+        visited = refit_to_target(probe, model, space, values, goal, state, u0, seeds, keep)
         u, d = min(visited, key=lambda v: v[1])
         found[fraction] = (u, d)
         points.append({"params": {**space.from_unit(u), **values}, "distance": d, "fraction": fraction,
@@ -188,7 +143,7 @@ def _probe_all(
     goal = np.asarray(target_embedding, dtype=np.float64)
     emb0, _ = probe.clips(base, [theta] * len(seeds), seeds)
     jac, _ = jacobian(probe, theta, emb0, seeds, JACOBIAN_STEP)
-    d0 = _distance(goal, emb0)
+    d0 = distance_to(goal, emb0)
     u0 = space.to_unit(theta)
     fixed = fixed_by_user(base, settings.fixed)
     keep = np.array([name not in fixed for name in space.names])

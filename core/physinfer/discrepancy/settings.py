@@ -51,8 +51,9 @@ class LimitConfig:
             "step": self.step,
             "reveal": self.reveal,
             "budget_share": self.budget_share,
-            # A new method invalidates a stored limits.json (2: each rung's own seed noise).
-            "method": 2,
+            # A new method invalidates a stored limits.json (2: each rung's own seed noise;
+            # 3: a deterministic baseline's refits from the polish's Jacobian too, its rungs encoded).
+            "method": 4,
         }
 
 
@@ -111,7 +112,9 @@ class DiagnoseSettings:
             name, before they are refined (:mod:`physinfer.discrepancy.screen`).
         ridge_starts: Start each effect's search where the video points along the ridge it
             shares with the base parameters, not only at the baseline's fit
-            (:mod:`physinfer.discrepancy.ridge`; ``False``: the baseline's fit alone).
+            (:mod:`physinfer.discrepancy.ridge`; ``False``: the baseline's fit alone); for
+            a deterministic phenomenon also start every control and effect from its start polished
+            towards its target (:func:`physinfer.discrepancy.stages.polished_starts`).
         scene_set: The scene's known settings (``--scene-set``; see :mod:`physinfer.scene`),
             bound to every model of the diagnosis and recorded in each stage's ``run.json``
             and in ``model.json``.
