@@ -68,7 +68,7 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     # One line per candidate with its detection limit on this clip.
     assert "quadratic_drag: named; this 4-s clip could" in " ".join(proc.stderr.split())
     assert "took " in proc.stderr and "effect-quadratic_drag" in report["timing"]["stages_s"]
-    strict = _run(*args, "--require-gap-test", "--json")
+    strict = _run(*args, "--require-gap-test", "--json", "--no-limits")  # the decision alone
     assert strict.returncode == 0, strict.stderr
     report = json.loads(strict.stdout)
     assert report["settings"]["rule"]["effect_evidence"] is False
