@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -405,8 +406,6 @@ def write_video(
 def round_trip(clip: Clip, crf: int = 18) -> Clip:
     """``clip`` written as H.264 at ``crf`` (as :func:`write_video` writes a target) and read
     back: what a clip looks like once it has been a file. A temporary file, deleted at once."""
-    import tempfile
-
     with tempfile.TemporaryDirectory(prefix="physinfer-round-trip-") as folder:
         back = read_video(write_video(Path(folder) / "clip.mp4", clip, crf=crf), fps=clip.fps)
     height, width = np.asarray(clip.frames).shape[1:3]

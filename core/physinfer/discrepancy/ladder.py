@@ -103,17 +103,20 @@ class Probe:
         trajectories: Sequence[Any],
         render_params: Mapping[str, Any] | None = None,
         embedder: Any = None,
+        *,
+        encoded: bool = False,
     ) -> np.ndarray:
-        """``(N, D)`` embeddings (a row of NaN for a failed simulation)."""
+        """``(N, D)`` embeddings (a row of NaN for a failed simulation); ``encoded``: each
+        clip through the video encoder and back first (:func:`physinfer.video.round_trip`)."""
         zeta = self.render_params if render_params is None else render_params
         embedder = embedder or self.base.embedder
+
+        def clip(traj: Any) -> Any:
+            rendered = self.base.renderer.render(traj, zeta)
+            return video.round_trip(rendered) if encoded else rendered
+
         return stack_rows(
-            [
-                None
-                if traj is None
-                else np.asarray(embedder.embed(self.base.renderer.render(traj, zeta)), dtype=np.float64)
-                for traj in trajectories
-            ]
+            [None if traj is None else np.asarray(embedder.embed(clip(traj)), dtype=np.float64) for traj in trajectories]
         )
 
     def encoded_clips(
@@ -123,17 +126,7 @@ class Probe:
         embedded (:func:`physinfer.video.round_trip`): a rung that stands for a target read
         from a file."""
         trajectories = self.trajectories(model.simulator, params, seeds)
-        embedder = self.base.embedder
-        rows = [
-            None
-            if traj is None
-            else np.asarray(
-                embedder.embed(video.round_trip(self.base.renderer.render(traj, self.render_params))),
-                dtype=np.float64,
-            )
-            for traj in trajectories
-        ]
-        return stack_rows(rows), trajectories
+        return self.embed(trajectories, encoded=True), trajectories
 
 
 #: Makes a probe whose clips run on the diagnosis' workers, one job per clip

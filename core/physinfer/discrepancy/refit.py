@@ -9,8 +9,8 @@ it — a line search along that step, then Gauss–Newton steps on a Broyden-upd
 continued from one rung to the next (:class:`RefitState`).
 
 The same steps refit the base parameters to a target's embedding instead of a rung's
-(:func:`refit_to_target`): the ridge starts (:mod:`physinfer.discrepancy.ridge`) and a
-control's polished start (:func:`polished_start`).
+(:func:`refit_to_target`): the ridge starts (:mod:`physinfer.discrepancy.ridge`) and every
+search's polished start (:func:`polished_start`).
 """
 
 from __future__ import annotations

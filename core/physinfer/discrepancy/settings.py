@@ -53,7 +53,7 @@ class LimitConfig:
             "budget_share": self.budget_share,
             # A new method invalidates a stored limits.json (2: each rung's own seed noise;
             # 3: a deterministic baseline's refits from the polish's Jacobian too, its rungs encoded).
-            "method": 4,
+            "method": 3,
         }
 
 
