@@ -455,7 +455,7 @@ def test_fixed_parameters_stay_fixed_in_every_model_and_in_the_model_file(tmp_pa
 
     target = _pendulum_target(tmp_path, "quadratic_drag")
     report = _diagnose(tmp_path, target, steps=2, optimizer="random", calibration_runs=1,
-                       calibration_control=False, fixed=("damping=0.05",))
+                       calibration_control=False, fixed=("damping=0.05",), limits=False)
     assert report["settings"]["fixed"] == {"damping": 0.05}
     out = tmp_path / "diag-quadratic_drag"
     for stage in ("baseline", "calibration-0", "control", "effect-quadratic_drag"):

@@ -56,7 +56,7 @@ def test_an_effect_s_significant_improvement_shows_misspecification_the_gap_test
     assert sim.returncode == 0, sim.stderr
     args = ["diagnose", "--plugin", "pendulum_lab", "--target", str(target), "--render-set", "size=48", "--steps", "8",
             "--effect-steps", "16", "--optimizer", "cma", "--floor-samples", "4", "--calibration-runs", "1",
-            "--threshold", "1000", "--no-video", "--no-ridge-starts", "--out", str(tmp_path / "diag")]
+            "--threshold", "1000", "--no-video", "--no-ridge-starts", "--workers", "0", "--out", str(tmp_path / "diag")]
     proc = _run(*args)
     assert proc.returncode == 0, proc.stderr
     report = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
