@@ -24,7 +24,8 @@ model's gap ratio and fitted θ, the stated limit ``detectable_from``, wall time
 ``half_way`` (the strength named half the time, interpolated linearly between strengths,
 at the first strength named half the time), ``half_way_logistic`` (the same from a logistic
 fit to every case, with a 90 % interval from resampling the seeds: five seeds a strength
-leave the first crossing at the mercy of one case) and ``false_discoveries`` (clean targets called misspecified or given a name). Each case's
+leave the first crossing at the mercy of one case), ``named_at_or_above_own_limit`` (named /
+cases among the targets at or above their seed's clean limit) and ``false_discoveries`` (clean targets called misspecified or given a name). Each case's
 row is kept in ``<out>/<case>/case.json``, and a case found there is not run again.
 
 Example (docs/benchmarks.md, "Diagnose: effects on a ridge")::
@@ -178,6 +179,15 @@ def logistic_half_way(rows: list[dict], effect: str, draws: int = 2000) -> dict[
     return {"half_way": fit(seeds), "ci90": interval, "fits": len(resampled), "draws": draws}
 
 
+def named_above_limit(rows: list[dict], effect: str) -> list[int]:
+    """``[named, cases]`` over the hidden-effect cases at or above their seed's clean target's
+    stated limit (what a user whose clean video was told "detectable from X" should expect)."""
+    limits = {r["seed"]: r["detectable_from"] for r in rows if r["strength"] == 0}
+    above = [r for r in rows if r["strength"] > 0 and limits.get(r["seed"]) is not None
+             and r["strength"] >= limits[r["seed"]]]  # fmt: skip
+    return [sum(r["named"] == effect for r in above), len(above)]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--case", choices=sorted(CASES), default="ball")
@@ -216,6 +226,7 @@ def main() -> int:
         "median_clean_limit": statistics.median(finite) if finite else None,
         "half_way": half_way(by_strength),
         "half_way_logistic": logistic_half_way(rows, effect),
+        "named_at_or_above_own_limit": named_above_limit(rows, effect),
         "false_discoveries": sum(bool(r["misspecified"] or r["named"]) for r in clean),
         "ridge_starts": not args.no_ridge_starts,
         "case": args.case,

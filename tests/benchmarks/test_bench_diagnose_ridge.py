@@ -43,3 +43,13 @@ def test_perfectly_separated_outcomes_have_no_fitted_half_way() -> None:
     outcomes = {0.0: [False, False], 0.3: [False, False], 0.6: [True, True], 0.9: [True, True]}
     fit = br.logistic_half_way(_rows(outcomes), "drag", draws=20)
     assert fit["half_way"] is None and fit["ci90"] is None
+
+
+def test_named_above_limit_counts_the_targets_at_or_above_their_seeds_clean_limit() -> None:
+    rows = [{"seed": 1, "strength": 0.0, "named": None, "detectable_from": 0.2},
+            {"seed": 1, "strength": 0.1, "named": "drag", "detectable_from": 0.2},  # below: not counted
+            {"seed": 1, "strength": 0.2, "named": None, "detectable_from": 0.3},
+            {"seed": 1, "strength": 0.4, "named": "drag", "detectable_from": 0.3},
+            {"seed": 2, "strength": 0.0, "named": None, "detectable_from": None},  # no limit stated
+            {"seed": 2, "strength": 0.4, "named": "drag", "detectable_from": 0.1}]  # fmt: skip
+    assert br.named_above_limit(rows, "drag") == [1, 2]
