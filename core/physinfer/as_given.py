@@ -14,9 +14,7 @@ checked on what it will be given.
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,11 +72,7 @@ def camera(clip: Clip, effects: dict[str, Any], rng: np.random.Generator) -> Cli
     """``clip`` through a camera and a file: white balance, blur and sensor noise, then an
     H.264 encoding at ``effects["crf"]`` read back. A grayscale clip is seen as colour."""
     pixels = filmed_pixels(np.asarray(clip.frames), effects, rng)
-    with tempfile.TemporaryDirectory(prefix="physinfer-as-given-") as folder:
-        path = video.write_video(Path(folder) / "clip.mp4", pixels, clip.fps, crf=effects["crf"])
-        back = video.read_video(path)
-    height, width = pixels.shape[1:3]
-    return Clip(back.frames[: len(pixels), :height, :width], clip.fps)
+    return video.round_trip(Clip(pixels, clip.fps), crf=effects["crf"])
 
 
 def filmed_pixels(frames: np.ndarray, effects: dict[str, Any], rng: np.random.Generator) -> np.ndarray:

@@ -15,7 +15,6 @@ search's polished start (:func:`polished_start`).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -310,7 +309,7 @@ def polished_start(
                 break
             best = (u, d)
         found = None if best[0] is u0 else {k: float(v) for k, v in space.from_unit(best[0]).items()}
+        stored = {"key": key, "start": found, "distance": float(best[1])}
         stage_dir.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(path, {"key": key, "start": found, "distance": float(best[1])})
-        stored = json.loads(path.read_text())
+        atomic_write_json(path, stored)
     return stored["start"]
