@@ -15,6 +15,8 @@ log-uniformly (seeded from ``900_000 + i``), and tells infer the drawn value (a 
 renderer's default ζ, its numeric settings, as ``infer --render-set``): an estimator told the
 camera (``posterior train --told-camera``) needs them, and the shipped one for them is chosen;
 ``--told NAME=VALUE`` tells a value other than the targets' (a camera told wrongly).
+``--duration SECONDS`` records longer targets (their first frames are the default-length
+targets' own), for which ``infer`` chooses a shipped estimator of longer clips when there is one.
 
     PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_posterior_targets.py --targets 100 \\
         --posterior plugins/flag/physinfer_flag/data/posterior_default.safetensors --degraded --rows rows.jsonl
@@ -210,6 +212,8 @@ def main() -> None:
     parser.add_argument("--told", action="append", default=[], metavar="NAME=VALUE",
                         help="with --render-set-told: tell this value instead of the targets' own (a wrong camera)")
     parser.add_argument("--photo", default=None, help="a video whose middle frame is the background")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds each target records (as `physinfer simulate --duration`; default: the plugin's)")
     parser.add_argument("--rows", type=Path, default=None, help="append per-target rows (JSON lines)")
     parser.add_argument("--summarise", action="store_true", help="only summarise --rows")
     args = parser.parse_args()
@@ -230,7 +234,7 @@ def main() -> None:
     scene = parse_scene_set(args.scene_set)
     ranges = parse_ranges(args.scene_range)
     wrong = {name: float(value) for name, value in parse_assignments(args.told, "--told").items()}
-    pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=scene or None)
+    pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=scene or None, duration_s=args.duration)
     names = drawn_parameters(args.plugin, pipeline.simulator.parameter_space)
     rows: list[dict[str, Any]] = []
     started = time.perf_counter()
@@ -240,7 +244,9 @@ def main() -> None:
             if ranges:  # this target's scene: its own simulator and renderer
                 pipeline.renderer.close()
                 target_scene = {**scene, **draw_scene(ranges, i)}
-                pipeline = build_pipeline(registry, args.plugin, embedder="", scene_set=target_scene)
+                pipeline = build_pipeline(
+                    registry, args.plugin, embedder="", scene_set=target_scene, duration_s=args.duration
+                )  # fmt: skip
             else:
                 target_scene = scene
             theta, trajectory = make_target(pipeline, args.plugin, i)
@@ -274,7 +280,7 @@ def main() -> None:
                 errors = {k: round(v["error"], 4) for k, v in row.get("params", {}).items()}
                 print(f"target {i} {label}: {errors or row.get('refused')}", file=sys.stderr, flush=True)
     print(json.dumps({
-        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "scene_ranges": ranges, "posterior": [str(p) for p in args.posterior or []] or "shipped", "render_set_told": args.render_set_told,
+        "benchmark": "posterior_targets", "plugin": args.plugin, "scene": scene, "scene_ranges": ranges, "posterior": [str(p) for p in args.posterior or []] or "shipped", "render_set_told": args.render_set_told, "duration": args.duration,
         "first": args.first, "targets": args.targets, "summary": summarise(rows),
         "seconds": round(time.perf_counter() - started, 1),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": platform.processor()},

@@ -267,9 +267,11 @@ class Phenomenon:
         default_posterior: Path of a shipped posterior estimator (``physinfer posterior
             train``) used by ``infer`` and ``refine`` when none is given; ``None``: none.
         scene_posteriors: Paths of further shipped estimators, trained across ranges of
-            scene settings (``dataset generate --scene-range``): when a target's scene
+            scene settings (``dataset generate --scene-range``), told the camera
+            (``posterior train --told-camera``) or on longer clips: when a target's scene
             (``--scene-set``) is not the default estimator's, the first that covers it is
-            used. Empty: none.
+            used; one told the camera only when ``--render-set`` tells it all; of those that
+            answer, the one trained on the longest clips the video covers. Empty: none.
         framing: ``(box) -> square``: maps the box ``(x, y, w, h)`` in pixels of the
             region that moves in a video to the square ``(x, y, side, side)`` the
             renderer frames at its default ζ (``physinfer prepare``); ``None``:

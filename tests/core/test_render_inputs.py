@@ -208,6 +208,46 @@ def test_a_shipped_estimator_told_the_camera_is_chosen_only_when_the_camera_is_t
     assert load_estimator(registry, "toy", told_path, "cpu")[1] == told_path
 
 
+def _of_longer_clips(path: Path, seconds: float, folder: Path | None = None) -> Path:
+    """A copy of the estimator at ``path`` recorded as trained on clips of ``seconds``, in
+    ``folder`` (default: beside it)."""
+    from dataclasses import replace
+
+    from physinfer.posterior.estimator import PosteriorEstimator
+
+    estimator = PosteriorEstimator.load(path)
+    frames = round(seconds * estimator.config.embedder_fps)
+    estimator.config = replace(estimator.config, clip_seconds=seconds, embedder_frames=frames)
+    return estimator.save((folder or path.parent) / f"{path.stem}-{seconds:g}s.safetensors")
+
+
+def test_a_longer_target_is_given_the_shipped_estimator_of_the_longest_clips_it_covers(toy):
+    from physinfer.posterior.loading import load_estimator
+
+    told_path, untold_path, _ = toy
+    told_long, untold_long = _of_longer_clips(told_path, 8.0), _of_longer_clips(untold_path, 8.0)
+    space = ParameterSpace([ParameterSpec("a", (0.0, 1.0)), ParameterSpec("b", (0.0, 1.0))])
+    phenomenon = SimpleNamespace(
+        name="toy", parameter_space=space, scene_settings=(), default_posterior=str(untold_path),
+        scene_posteriors=(str(told_path), str(told_long), str(untold_long)),
+    )  # fmt: skip
+    registry = SimpleNamespace(phenomenon=lambda name: phenomenon)
+
+    def chosen(seconds, render=None) -> Path:
+        return load_estimator(registry, "toy", None, "cpu", render=render, seconds=seconds)[1]
+
+    told = {"camera_azimuth_deg": 2.0}
+    assert chosen(None) == untold_path and chosen(None, told) == told_path  # no length: the first
+    assert chosen(0.4) == untold_path and chosen(0.4, told) == told_path  # as long as the short clips
+    assert chosen(7.9) == untold_path and chosen(7.9, told) == told_path  # too short for the long ones
+    assert chosen(8.0) == untold_long and chosen(8.0, told) == told_long
+    assert chosen(30.0) == untold_long and chosen(30.0, told) == told_long
+    assert chosen(0.1) == untold_path  # shorter than every one: the first (the embedding refuses it)
+    # Told the camera, a target too short for every told estimator: the untold ones answer.
+    phenomenon.scene_posteriors = (str(told_long), str(untold_long))
+    assert chosen(0.4, told) == untold_path and chosen(8.0, told) == told_long
+
+
 @pytest.mark.skipif(
     not (Path(__file__).parents[2] / "plugins/flag/physinfer_flag/data/posterior_camera.safetensors").is_file(),
     reason="the flag's estimator told the camera is not shipped in this checkout",
@@ -268,3 +308,53 @@ def test_refine_starts_from_the_estimator_told_the_camera_when_render_set_tells_
 
     assert estimator(camera) == "posterior_camera.safetensors"
     assert estimator(None) == "posterior_default.safetensors"
+
+
+@pytest.mark.skipif(
+    not (Path(__file__).parents[2] / "plugins/flag/physinfer_flag/data/posterior_camera.safetensors").is_file(),
+    reason="the flag's estimator told the camera is not shipped in this checkout",
+)
+def test_infer_and_refine_take_a_shipped_estimator_of_longer_clips_for_a_longer_video(tmp_path, monkeypatch):
+    """A 4-s flag video told its camera: ``infer`` (which loads the target after the
+    estimator) and ``refine``'s start switch to a shipped estimator of 4-s clips; a 2.4-s
+    video keeps the 2.4-s one. The 4-s file is the shipped 2.4-s one recorded as reading 100
+    frames (the spectral embedding has the same size at any length): only the choice is tested."""
+    from dataclasses import replace
+
+    from physinfer.pipeline import build_pipeline
+    from physinfer.plugins import load_registry
+    from physinfer.posterior.infer_workflow import infer, posterior_for_refinement
+    from physinfer.video import write_video
+
+    registry = load_registry()[0]
+    flag = registry.phenomenon("flag")
+    camera_file = Path(flag.scene_posteriors[1])
+    assert camera_file.name == "posterior_camera.safetensors"
+    moved = _of_longer_clips(camera_file, 4.0, tmp_path)
+    patched = replace(flag, scene_posteriors=(*flag.scene_posteriors, str(moved)))
+    monkeypatch.setattr(registry, "phenomenon", lambda name: patched if name == "flag" else flag)
+    camera = {
+        "camera_azimuth_deg": 0.0, "camera_elevation_deg": -5.0, "fov_deg": 40.0, "framing": 1.0,
+        "light_intensity": 2.5, "ambient_intensity": 0.3,
+    }  # fmt: skip
+    pipeline = build_pipeline(registry, "flag", embedder="", duration_s=4.0)
+    theta = pipeline.simulator.parameter_space.complete({"wind_speed": 5.0})
+    clip = pipeline.renderer.render(pipeline.simulator.simulate(theta, seed=3), pipeline.renderer.default_render_params)
+    pipeline.renderer.close()
+    video = write_video(tmp_path / "four.mp4", clip)
+
+    def answered(path, frames=None) -> str:
+        report = infer(
+            registry, plugin="flag", out=tmp_path / f"out-{frames}", target_path=path, n_samples=200,
+            check=False, render_set=camera,
+        )  # fmt: skip
+        return Path(report.estimator).name
+
+    assert answered(video) == moved.name
+    short = write_video(tmp_path / "short.mp4", replace(clip, frames=clip.frames[:60]))
+    assert answered(short, 60) == "posterior_camera.safetensors"
+    report, why = posterior_for_refinement(
+        registry, plugin="flag", parameter_space=flag.parameter_space, clip=clip,
+        posterior=None, device="cpu", n_samples=200, render=camera,
+    )  # fmt: skip
+    assert report is not None and Path(report.estimator).name == moved.name, why

@@ -25,6 +25,7 @@ from physinfer.posterior.loading import (
     embed_target,
     estimator_embedder,
     load_estimator,
+    shipped_for_longer,
     told_passed_over,
 )
 from physinfer.posterior.summary import correlations, format_marginal, marginals
@@ -221,6 +222,8 @@ def infer(
         loaded.pipeline, target_path, fps=fps, truth=truth, render_set=render_set or {}, conditioning=conditioning
     )  # fmt: skip
     told = {name: target.render_params[name] for name in render_set or {}}  # as the renderer types them
+    if posterior is None:  # a longer video may have a shipped estimator of longer clips
+        loaded = _for_target_length(registry, plugin, loaded, device, scene_set, render_set, target.clip.duration)
     t_ready = time.perf_counter()
     report = posterior_of_clip(
         loaded.estimator, loaded.pipeline.embedder, target.clip, n_samples=n_samples, seed=seed,
@@ -279,6 +282,28 @@ def _load_estimator(
     estimator.check_scene(phenomenon, scene, path)
     pipeline = estimator_embedder(registry, estimator, device)
     return _LoadedEstimator(phenomenon, scene, estimator, path, pipeline)
+
+
+def _for_target_length(
+    registry: Registry,
+    plugin: str,
+    loaded: _LoadedEstimator,
+    device: str | None,
+    scene_set: Mapping[str, Any] | None,
+    render_set: Mapping[str, Any] | None,
+    seconds: float,
+) -> _LoadedEstimator:
+    """The shipped estimator for a target of ``seconds`` (the longest clips it covers), or
+    ``loaded``. The target was framed for ``loaded``'s embedder: only one of the same
+    embedder and rate (reading more frames) is taken."""
+    if not shipped_for_longer(loaded.phenomenon, loaded.estimator.config.clip_seconds, seconds):
+        return loaded  # the usual case: nothing to reload
+    estimator, path = load_estimator(registry, plugin, None, device, scene=loaded.scene, render=render_set, seconds=seconds)
+    now, longer = loaded.estimator.config, estimator.config
+    if path == loaded.path or (longer.embedder, longer.embedder_fps) != (now.embedder, now.embedder_fps):
+        return loaded
+    loaded.pipeline.renderer.close()
+    return _load_estimator(registry, plugin, path, device, scene_set, render_set)
 
 
 def _check_adequacy(
@@ -434,7 +459,9 @@ def posterior_for_refinement(
     if posterior is None and getattr(phenomenon, "default_posterior", None) is None:
         return None, None
     try:
-        estimator, path = load_estimator(registry, plugin, posterior, device, scene=scene, render=render)
+        estimator, path = load_estimator(
+            registry, plugin, posterior, device, scene=scene, render=render, seconds=clip.duration
+        )  # fmt: skip
         estimator.check_for(plugin, parameter_space, path)
         estimator.check_scene(phenomenon, scene, path)
         pipeline = estimator_embedder(registry, estimator, device)

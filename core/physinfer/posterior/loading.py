@@ -4,6 +4,7 @@ and the ``progress`` callback type they share."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -12,7 +13,7 @@ import numpy as np
 
 from physinfer.errors import UserInputError
 from physinfer.pipeline import build_pipeline
-from physinfer.posterior.estimator import PosteriorEstimator, resolve_device
+from physinfer.posterior.estimator import EstimatorConfig, PosteriorEstimator, resolve_device
 from physinfer.registry import Registry
 from physinfer.scene import default_scene, scene_text
 
@@ -63,6 +64,7 @@ def load_estimator(
     *,
     scene: Mapping[str, Any] | None = None,
     render: Mapping[str, Any] | None = None,
+    seconds: float | None = None,
 ) -> tuple[PosteriorEstimator, Path]:
     """The estimator at ``path`` or the phenomenon's shipped one, checked against ``plugin``.
 
@@ -72,8 +74,10 @@ def load_estimator(
     settings (:attr:`~physinfer.posterior.estimator.EstimatorConfig.render_inputs`) is
     chosen first when ``render`` (the user's ``--render-set``) gives every one of them
     within its training ranges and it covers the scene; otherwise such estimators are
-    passed over. A given ``path`` is not checked against ``scene`` here: callers call
-    :meth:`PosteriorEstimator.check_scene`.
+    passed over. ``seconds``: the target's length; of the shipped estimators that answer,
+    the one trained on the longest clips the target covers is chosen (a longer clip tells
+    fast motions apart better), else the first. A given ``path`` is not checked against
+    ``scene`` here: callers call :meth:`PosteriorEstimator.check_scene`.
 
     Raises:
         UserInputError: no estimator given and none shipped, or one made for another
@@ -88,8 +92,8 @@ def load_estimator(
                 f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
             )
         device = resolve_device(device)
-        told = _shipped_told(phenomenon, scene, render, device) if render else None
-        estimator, path = told or _shipped_for_scene(phenomenon, Path(shipped), scene, device)
+        told = _shipped_told(phenomenon, scene, render, device, seconds) if render else None
+        estimator, path = told or _shipped_for_scene(phenomenon, Path(shipped), scene, device, seconds)
     else:
         estimator = PosteriorEstimator.load(path, device=resolve_device(device))
     estimator.check_for(plugin, phenomenon.parameter_space, path)
@@ -97,15 +101,33 @@ def load_estimator(
 
 
 def _shipped_told(
-    phenomenon: Any, scene: Mapping[str, Any] | None, render: Mapping[str, Any], device: str
+    phenomenon: Any,
+    scene: Mapping[str, Any] | None,
+    render: Mapping[str, Any],
+    device: str,
+    seconds: float | None = None,
 ) -> tuple[PosteriorEstimator, Path] | None:
-    """The first of the ``scene_posteriors`` that takes render settings, all of which
-    ``render`` gives within its training ranges, and that covers ``scene``; or ``None``."""
+    """Of the ``scene_posteriors`` that take render settings, all of which ``render`` gives
+    within their training ranges, and that cover ``scene``: the one for ``seconds``
+    (:func:`_for_length`); ``None`` when none answers (or none for so short a target)."""
+    answering = []
     for path in _shipped_others(phenomenon):
         estimator = PosteriorEstimator.load(path, device=device)
         if estimator.config.render_inputs and _told_misfit(estimator, phenomenon, scene, render) is None:
-            return estimator, path
-    return None
+            answering.append((estimator, path))
+    return _for_length(answering, seconds)
+
+
+def _for_length(
+    answering: list[tuple[PosteriorEstimator, Path]], seconds: float | None
+) -> tuple[PosteriorEstimator, Path] | None:
+    """Of estimators that all answer, the one trained on the longest clips a target of
+    ``seconds`` covers (the first of equals); the first when ``seconds`` is ``None``;
+    ``None`` when there are none or the target is shorter than every one's clips."""
+    if seconds is None:
+        return answering[0] if answering else None
+    covered = [pair for pair in answering if pair[0].config.clip_seconds <= seconds + 1e-6]
+    return max(covered, key=lambda pair: pair[0].config.clip_seconds) if covered else None
 
 
 def _told_misfit(
@@ -142,16 +164,41 @@ def told_passed_over(
     return reasons
 
 
+def shipped_for_longer(phenomenon: Any, than: float, seconds: float) -> bool:
+    """Whether the phenomenon ships an estimator of clips longer than ``than`` seconds that a
+    target of ``seconds`` covers (read from the files' metadata: cheap enough for every
+    ``infer``)."""
+    for path in _shipped_others(phenomenon):
+        config = stored_config(path)
+        if config is not None and than + 1e-6 < config.clip_seconds <= seconds + 1e-6:
+            return True
+    return False
+
+
+def stored_config(path: str | Path) -> EstimatorConfig | None:
+    """The configuration an estimator file stores, read from its metadata alone (no network
+    built, no digest checked: for choosing among shipped files before loading one, which
+    :meth:`PosteriorEstimator.load` checks); ``None`` when it cannot be read."""
+    from safetensors import safe_open
+
+    try:
+        with safe_open(str(path), framework="pt", device="cpu") as f:
+            return EstimatorConfig.from_dict(json.loads((f.metadata() or {})["physinfer"]))
+    except Exception:  # noqa: BLE001 - any unreadable file is "no configuration"
+        return None
+
+
 def _shipped_others(phenomenon: Any) -> list[Path]:
     """The phenomenon's ``scene_posteriors`` that exist."""
     return [Path(p) for p in getattr(phenomenon, "scene_posteriors", ()) or () if Path(p).is_file()]
 
 
 def _shipped_for_scene(
-    phenomenon: Any, default: Path, scene: Mapping[str, Any] | None, device: str
+    phenomenon: Any, default: Path, scene: Mapping[str, Any] | None, device: str, seconds: float | None = None
 ) -> tuple[PosteriorEstimator, Path]:
     """The first shipped estimator (the default, then ``scene_posteriors``) that covers
-    ``scene`` and takes no render settings; the default when none is shipped for other
+    ``scene`` and takes no render settings, or with ``seconds`` the one of those for the
+    target's length (:func:`_for_length`); the default when none is shipped for other
     scenes (its refusal is then the caller's to raise).
 
     Raises:
@@ -160,6 +207,7 @@ def _shipped_for_scene(
     """
     first = PosteriorEstimator.load(default, device=device)
     refusals: list[str] = []
+    answering: list[tuple[PosteriorEstimator, Path]] = []
     found_others = False
     for path in [default, *_shipped_others(phenomenon)]:
         estimator = first if path == default else PosteriorEstimator.load(path, device=device)
@@ -171,7 +219,11 @@ def _shipped_for_scene(
         except UserInputError as exc:
             refusals.append(str(exc) if path == default else _coverage(estimator, path, phenomenon))
             continue
-        return estimator, path
+        answering.append((estimator, path))
+        if seconds is None:
+            break  # the first that answers: no need to load the rest
+    if answering:  # a target shorter than all their clips: the first, whose embedding refuses it
+        return _for_length(answering, seconds) or answering[0]
     if not found_others:
         return first, default
     raise UserInputError(f"{refusals[0]} (the plugin's other shipped estimators: {'; '.join(refusals[1:])})")
