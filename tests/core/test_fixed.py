@@ -1,9 +1,6 @@
 """Holding parameters fixed (``--fix``), on the pendulum example plugin."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +13,6 @@ from physinfer.plugins import load_registry
 from physinfer.rundir import RunDirectory
 from physinfer.session import refine
 
-BIN = Path(sys.executable).parent / "physinfer"
 SPACE = ParameterSpace(
     [ParameterSpec("wind", (0.0, 10.0)), ParameterSpec("bend_a", (0.1, 10.0)), ParameterSpec("bend_b", (0.1, 10.0))]
 )
@@ -57,12 +53,11 @@ def test_fixed_simulator_searches_the_free_parameters_and_simulates_the_full_mod
     assert not np.array_equal(ours.vertices, other.vertices), "the fixed value reaches the simulator"
 
 
-def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(tmp_path):
+def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(tmp_path, physinfer_cli):
     out = tmp_path / "run"
-    proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum_lab", "--steps", "3", "--optimizer", "random", "--fix", "amplitude=40",
-         "--truth", "amplitude=40", "--out", str(out), "--json"],
-        capture_output=True, text=True, timeout=600,
+    proc = physinfer_cli(
+        "refine", "--plugin", "pendulum_lab", "--steps", "3", "--optimizer", "random", "--fix", "amplitude=40",
+        "--truth", "amplitude=40", "--out", str(out), "--json",
     )
     assert proc.returncode == 0, proc.stderr
     data = json.loads(proc.stdout)
@@ -75,12 +70,9 @@ def test_refine_with_fix_searches_fewer_dimensions_and_reports_the_fixed_values(
                resume=True, progress=False)
 
 
-def test_a_bad_fix_fails_before_anything_is_written(tmp_path):
+def test_a_bad_fix_fails_before_anything_is_written(tmp_path, physinfer_cli):
     out = tmp_path / "run"
-    proc = subprocess.run(
-        [str(BIN), "refine", "--plugin", "pendulum_lab", "--steps", "3", "--fix", "lenght=1", "--out", str(out)],
-        capture_output=True, text=True, timeout=300,
-    )
+    proc = physinfer_cli("refine", "--plugin", "pendulum_lab", "--steps", "3", "--fix", "lenght=1", "--out", str(out))
     assert proc.returncode == 2
     assert "no parameter matches 'lenght'" in proc.stderr and "Traceback" not in proc.stderr
     assert not out.exists()

@@ -6,9 +6,6 @@ The flag's own framing on composited flag renders is tested in
 """
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +18,6 @@ from physinfer.testing.footage import textured_background
 from physinfer.types import Clip
 from physinfer.video import read_video, write_video
 
-BIN = Path(sys.executable).parent / "physinfer"
 #: Where the moving patch is in the 640×360 test videos: (x, y, w, h).
 PATCH = (380, 90, 160, 120)
 
@@ -148,13 +144,11 @@ def test_an_empty_or_outside_roi_is_refused_before_the_one_subject_check(still_c
         check_one_subject(still_camera, roi, 20.0)
 
 
-def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_path):
+def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_path, physinfer_cli):
     out = tmp_path / "out" / "prepared.mp4"
     write_video(tmp_path / "in.mp4", Clip(still_camera.frames[:12], still_camera.fps))
-    proc = subprocess.run(
-        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(tmp_path / "in.mp4"), "--out", str(out),
-         "--json"],
-        capture_output=True, text=True, timeout=300,
+    proc = physinfer_cli(
+        "prepare", "--plugin", "pendulum_lab", "--target", str(tmp_path / "in.mp4"), "--out", str(out), "--json"
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     data = json.loads(proc.stdout)
@@ -171,10 +165,8 @@ def test_cli_writes_video_json_and_overlay_and_asks_for_fps(still_camera, tmp_pa
     frames.mkdir()
     for index, frame in enumerate(still_camera.frames[:3]):
         Image.fromarray(frame).save(frames / f"{index:03d}.png")
-    proc = subprocess.run(
-        [str(BIN), "prepare", "--plugin", "pendulum_lab", "--target", str(frames), "--out", str(out), "--overwrite",
-         "--json"],
-        capture_output=True, text=True, timeout=300,
+    proc = physinfer_cli(
+        "prepare", "--plugin", "pendulum_lab", "--target", str(frames), "--out", str(out), "--overwrite", "--json"
     )  # fmt: skip
     assert proc.returncode == 2 and "pass it with --fps" in json.loads(proc.stdout)["error"]
 
