@@ -75,8 +75,8 @@ def load_estimator(
     chosen first when ``render`` (the user's ``--render-set``) gives every one of them
     within its training ranges and it covers the scene; otherwise such estimators are
     passed over. ``seconds``: the target's length; of the shipped estimators that answer,
-    the one trained on the longest clips the target covers is chosen (a longer clip tells
-    fast motions apart better), else the first. A given ``path`` is not checked against
+    the one trained on the longest clips the target covers is chosen (it reads more of the
+    video), else the first. A given ``path`` is not checked against
     ``scene`` here: callers call :meth:`PosteriorEstimator.check_scene`.
 
     Raises:
