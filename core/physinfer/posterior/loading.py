@@ -92,6 +92,8 @@ def load_estimator(
                 f"train --plugin {plugin} --data DATASET --out FILE.safetensors` and pass --posterior FILE"
             )
         device = resolve_device(device)
+        if seconds is not None and len(_shipped_lengths(phenomenon, Path(shipped))) < 2:
+            seconds = None  # one clip length shipped: the first that answers, none loaded past it
         told = _shipped_told(phenomenon, scene, render, device, seconds) if render else None
         estimator, path = told or _shipped_for_scene(phenomenon, Path(shipped), scene, device, seconds)
     else:
@@ -186,6 +188,12 @@ def stored_config(path: str | Path) -> EstimatorConfig | None:
             return EstimatorConfig.from_dict(json.loads((f.metadata() or {})["physinfer"]))
     except Exception:  # noqa: BLE001 - any unreadable file is "no configuration"
         return None
+
+
+def _shipped_lengths(phenomenon: Any, default: Path) -> set[float]:
+    """The clip lengths of the shipped estimators, read from their metadata."""
+    configs = [stored_config(path) for path in [default, *_shipped_others(phenomenon)]]
+    return {config.clip_seconds for config in configs if config is not None}
 
 
 def _shipped_others(phenomenon: Any) -> list[Path]:
