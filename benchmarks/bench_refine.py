@@ -60,7 +60,7 @@ from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
 from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
-from physinfer.refinement import RefineConfig
+from physinfer.refinement import SearchSpec
 from physinfer.roles import Target
 from physinfer.rundir import RunDirectory
 
@@ -85,7 +85,7 @@ def make_target(pipeline: Any, index: int) -> Target:
 
 def refine_one(pipeline: Any, registry: Any, target: Target, optimizer: str, args: argparse.Namespace, out: Path) -> dict:
     """One refinement; returns its row for ``results.jsonl``."""
-    config = RefineConfig(
+    config = SearchSpec(
         steps=args.steps,
         optimizer=optimizer,
         seed=0,

@@ -28,7 +28,7 @@ import numpy as np
 from physinfer.errors import UserInputError
 from physinfer.evaluation import evaluate_batch
 from physinfer.moved import moved_names
-from physinfer.refinement import FitPlace, NoiseReport, RefineResult
+from physinfer.refinement import FitPlace, NoiseReport, RefineResult, SearchSpec
 from physinfer.resimulation import final_noise_floor, observation_noise, select_best
 from physinfer.roles import Optimizer, Target, Trial
 from physinfer.rundir import RESUME_KEYS, TrialRecord, embedding_fingerprint
@@ -36,7 +36,6 @@ from physinfer.threads import refinement_torch_threads, torch_threads
 
 if TYPE_CHECKING:
     from physinfer.evaluation import ClipEmbedder, Pipeline
-    from physinfer.refinement import RefineConfig
     from physinfer.rundir import RunDirectory
 
 #: The evaluation, re-simulation and run-file names that moved out of the loop, still found
@@ -44,7 +43,7 @@ if TYPE_CHECKING:
 __getattr__ = moved_names(__name__)
 
 
-def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: RefineConfig, sem: float | None) -> None:
+def _replay(optimizer: Optimizer, records: Sequence[TrialRecord], config: SearchSpec, sem: float | None) -> None:
     """Feed logged trials back to a fresh optimizer so it continues where the run stopped."""
     for rec in records:
         trial = optimizer.attach(np.asarray(rec.x, dtype=float))
@@ -70,7 +69,7 @@ def run_refinement(
     target: Target,
     optimizer_factory: Callable[..., Optimizer],
     run_dir: RunDirectory,
-    config: RefineConfig,
+    config: SearchSpec,
     *,
     run_info: dict[str, Any],
     resume: bool = False,
@@ -84,7 +83,8 @@ def run_refinement(
         target: The clip to match, its oracle ζ and truth if known.
         optimizer_factory: Builds the optimizer with ``dim``, ``seed``, ``names``.
         run_dir: Where trials are logged.
-        config: Budget, optimizer and seed.
+        config: How to search: budget (resolved: :meth:`~physinfer.refinement.SearchSpec.with_budget`),
+            optimizer, seed, noise handling and selection.
         run_info: What is stored in ``run.json`` (checked on resume).
         resume: Continue the trials already logged.
         on_trial: Called after each trial with the record and the best distance so far.
@@ -95,6 +95,8 @@ def run_refinement(
         The :class:`RefineResult` (the refine command writes it out:
             :func:`physinfer.session.write_outputs`).
     """
+    if config.steps is None:  # the command resolves it: the default depends on the start
+        raise ValueError("run_refinement needs a budget: pass search.with_budget(phenomenon, from_posterior=...)")
     config.validate()
     with torch_threads(refinement_torch_threads()):
         return _run_refinement(
@@ -107,7 +109,7 @@ def _run_refinement(
     target: Target,
     optimizer_factory: Callable[..., Optimizer],
     run_dir: RunDirectory,
-    config: RefineConfig,
+    config: SearchSpec,
     run_info: dict[str, Any],
     resume: bool,
     on_trial: Callable[[TrialRecord, float], None] | None,
@@ -158,7 +160,7 @@ def _step(
     target: Target,
     target_embedding: np.ndarray,
     step: int,
-    config: RefineConfig,
+    config: SearchSpec,
     sem: float | None,
 ) -> list[TrialRecord]:
     """One optimizer step from trial ``step`` on: ask for its trials, simulate and embed them

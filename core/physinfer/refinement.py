@@ -1,10 +1,11 @@
-"""A refinement's records: its settings (:class:`RefineConfig`) and what it found
+"""A refinement's records: how it searches (:class:`SearchSpec`) and what it found
 (:class:`RefineResult`), with what it reports beside the best fit in typed sections
 (:class:`NoiseReport`, :class:`FitPlace`, :class:`TargetReport`, :class:`TargetPosterior`).
 
-Below the loop (:mod:`physinfer.loop`, which re-exports them) and its re-simulations
-(:mod:`physinfer.resimulation`), so that both, the commands and the diagnosis read them
-from one place.
+Below the loop (:mod:`physinfer.loop`) and its re-simulations (:mod:`physinfer.resimulation`),
+so that both, the commands and the diagnosis read them from one place. ``RefineConfig``, the
+loop's settings before they became the search's one record, is found here with a warning
+(:data:`physinfer.moved.MOVED`).
 """
 
 from __future__ import annotations
@@ -13,28 +14,46 @@ import copy
 import functools
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.moved import moved_names
 from physinfer.noise import noise_seeds
 from physinfer.plotting import refinement_figure
 from physinfer.rundir import TrialRecord
 
+__getattr__ = moved_names(__name__)
+
+
+def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
+    """The trials of a refinement: ``steps`` when given; otherwise the phenomenon's default,
+    or its ``default_steps_with_posterior`` when the search starts from a posterior estimator."""
+    if steps is not None:
+        return steps
+    if from_posterior and phenomenon.default_steps_with_posterior is not None:
+        return int(phenomenon.default_steps_with_posterior)
+    return int(phenomenon.default_steps)
+
 
 @dataclass(frozen=True)
-class RefineConfig:
-    """Settings of one refinement.
+class SearchSpec:
+    """How a refinement searches: the budget, the optimizer, the noise handling, the final
+    selection and the posterior estimator the search may start from.
+
+    One record from the command to the loop: the refine command fills it from its options
+    (its defaults are the command's), resolves the budget (:meth:`with_budget`) once it knows
+    whether the search starts from a posterior, and the loop reads it. A diagnosis' stage
+    gives every field it relies on.
 
     Attributes:
-        steps: Total number of trials (including the centre trial and resumed ones).
+        steps: Total number of trials (including the centre trial and resumed ones);
+            ``None``: :func:`default_budget`, resolved by the command before the loop runs.
         optimizer: Registered optimizer name.
         seed: Seed of the optimizer and of every simulation (so a θ maps to one clip).
-        noise_sem: Standard error of the objective told to the optimizer for every
-            observation; ``None``: measured (``noise_samples`` > 0) or inferred by the
-            optimizer.
         noise_samples: Before optimising, re-simulate the centre θ under this many extra
             seeds and tell the optimizer the spread of the objective as its standard error
             (0: do not measure). Ignored when ``noise_sem`` is given.
@@ -42,9 +61,6 @@ class RefineConfig:
             seeds (the run seed first), trading steps for less noise per observation.
         floor_samples: After the run, re-simulate the best θ under this many seeds and
             report the noise floor and the gap in ``result.json`` (0: skip).
-        log_objective: Tell the optimizer ``log(D)`` instead of ``D``. The minimiser is the
-            same, but the landscape is far smoother (distances span orders of magnitude),
-            which suits a GP surrogate; results always report ``D`` itself.
         select_top: After the run, re-simulate the best ``M`` trials (distinct θ) under
             ``select_seeds`` fresh seeds each and report the one with the lowest mean
             fresh distance as the best (0: the lowest logged distance; see
@@ -52,19 +68,38 @@ class RefineConfig:
         select_seeds: Fresh seeds per finalist of the selection.
         batch_size: Trials proposed per optimizer step and simulated as one batch (q);
             1 proposes, simulates and tells one trial at a time (the paper's loop).
+        posterior: Posterior estimator file the command starts from (``None``: the
+            phenomenon's shipped one).
+        use_posterior: Use an estimator at all (``False``: a best fit only).
+        noise_sem: Standard error of the objective told to the optimizer for every
+            observation; ``None``: measured (``noise_samples`` > 0) or inferred by the
+            optimizer.
+        log_objective: Tell the optimizer ``log(D)`` instead of ``D``. The minimiser is the
+            same, but the landscape is far smoother (distances span orders of magnitude),
+            which suits a GP surrogate; results always report ``D`` itself.
     """
 
-    steps: int = 40
+    steps: int | None = None
     optimizer: str = "ax"
     seed: int = 0
-    noise_sem: float | None = None
-    noise_samples: int = 0
+    noise_samples: int = 3
     seeds_per_trial: int = 1
-    floor_samples: int = 0
-    log_objective: bool = True
+    floor_samples: int = 4
     select_top: int = 0
     select_seeds: int = 3
     batch_size: int = 1
+    posterior: Path | None = None
+    use_posterior: bool = True
+    noise_sem: float | None = None
+    log_objective: bool = True
+
+    def budget(self, phenomenon: Any, *, from_posterior: bool) -> int:
+        """The trials of this search (:func:`default_budget`)."""
+        return default_budget(phenomenon, self.steps, from_posterior=from_posterior)
+
+    def with_budget(self, phenomenon: Any, *, from_posterior: bool) -> SearchSpec:
+        """This search with its budget resolved (:meth:`budget`): what the loop runs."""
+        return replace(self, steps=self.budget(phenomenon, from_posterior=from_posterior))
 
     def objective(self, distance: float | None) -> float | None:
         """The value told to the optimizer for a distance (``None`` stays ``None``)."""
@@ -73,8 +108,9 @@ class RefineConfig:
         return float(np.log(distance + 1e-12))
 
     def validate(self) -> None:
-        """Raise :class:`UserInputError` for a non-positive budget."""
-        if self.steps < 1:
+        """Raise :class:`UserInputError` for a non-positive budget or a count out of range
+        (``steps`` ``None``, not yet resolved, passes)."""
+        if self.steps is not None and self.steps < 1:
             raise UserInputError(f"--steps must be at least 1, got {self.steps}")
         if self.seeds_per_trial < 1:
             raise UserInputError(f"--seeds-per-trial must be at least 1, got {self.seeds_per_trial}")

@@ -1,7 +1,6 @@
 """A refinement's re-simulations: the observation noise told to the optimizer (the centre
 under extra seeds), the selection of the best fit among the finalists (each under fresh
-seeds), and the noise floor at the best fit. Used by :mod:`physinfer.loop`'s loop, which
-re-exports them.
+seeds), and the noise floor at the best fit: the loop's (:mod:`physinfer.loop`) re-simulations.
 """
 
 from __future__ import annotations
@@ -17,7 +16,7 @@ from physinfer.errors import SimulationFailed
 from physinfer.evaluation import ClipEmbedder, Pipeline, evaluate, squared_distance
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.noise import measure_noise_floor, noise_seeds
-from physinfer.refinement import RefineConfig, RefineResult
+from physinfer.refinement import RefineResult, SearchSpec
 from physinfer.roles import Target
 from physinfer.rundir import NOISE_PRIOR_FILE, SELECTION_FILE, RunDirectory, TrialRecord
 
@@ -30,7 +29,7 @@ def observation_noise(
     target: Target,
     target_embedding: np.ndarray,
     run_dir: RunDirectory,
-    config: RefineConfig,
+    config: SearchSpec,
 ) -> float | None:
     """The standard error told to the optimizer with every observation.
 
@@ -80,7 +79,7 @@ def select_best(
     target: Target,
     target_embedding: np.ndarray,
     run_dir: RunDirectory,
-    config: RefineConfig,
+    config: SearchSpec,
     embed_clips: ClipEmbedder | None = None,
 ) -> dict[str, Any] | None:
     """Choose the best θ among the ``select_top`` best trials by re-simulating them.
@@ -171,7 +170,7 @@ def final_noise_floor(
     pipeline: Pipeline,
     target: Target,
     target_embedding: np.ndarray,
-    config: RefineConfig,
+    config: SearchSpec,
 ) -> dict[str, Any] | None:
     """The noise floor at the best θ: how far its own re-simulations are from each other
     (``floor``) and from the target (``gap``); ``ratio`` near 1 means the fit is as good as

@@ -8,7 +8,7 @@ outputs (result files, figures, videos, the report).
 
 :mod:`physinfer.api` calls :func:`run`; :func:`refine` takes the specs' fields as keywords.
 The pipeline builders, ``load_target`` and ``default_budget`` moved to :mod:`physinfer.pipeline`,
-:mod:`physinfer.target` and :mod:`physinfer.specs`; code written before finds them here with a
+:mod:`physinfer.target` and :mod:`physinfer.refinement`; code written before finds them here with a
 warning (:data:`physinfer.moved.MOVED`).
 """
 
@@ -34,7 +34,7 @@ from physinfer.moved import moved_names
 from physinfer.pipeline import fixed_by_user, full_parameter_space, target_duration
 from physinfer.plotting import plot_refinement  # imports matplotlib when it draws
 from physinfer.posterior.refined import posterior_start, report_posterior
-from physinfer.refinement import RefineResult, TargetPosterior, TargetReport
+from physinfer.refinement import RefineResult, SearchSpec, TargetPosterior, TargetReport
 from physinfer.registry import Registry
 from physinfer.report import write_report_quietly
 from physinfer.roles import Optimizer, Target
@@ -47,7 +47,7 @@ from physinfer.rundir import (
     path_sha256,
 )
 from physinfer.scene import scene_of
-from physinfer.specs import ModelSpec, RefineRequest, SearchSpec
+from physinfer.specs import ModelSpec, RefineRequest
 from physinfer.target import start_from_video, start_identity
 from physinfer.threads import with_refinement_threads
 from physinfer.trial_workers import trial_workers
@@ -68,7 +68,7 @@ def refine(registry: Registry, *, progress: Progress = True, **settings: Any) ->
     ``plugin`` and ``out`` are needed; the model (:class:`~physinfer.specs.ModelSpec`:
     ``effects``, ``fixed``, ``model``, ...), the target (:class:`~physinfer.specs.TargetSpec`:
     ``target_path``, ``truth``, ``conditioning``, ...), the search
-    (:class:`~physinfer.specs.SearchSpec`: ``steps``, ``select_top``, ``posterior``, ...) and
+    (:class:`~physinfer.refinement.SearchSpec`: ``steps``, ``select_top``, ``posterior``, ...) and
     the execution (:class:`~physinfer.specs.ExecutionSpec`: ``resume``, ``workers``, ...).
     See :func:`run`.
     """
@@ -92,21 +92,21 @@ def run(registry: Registry, request: RefineRequest, *, progress: Progress = True
     run_dir = execution.run_directory(request.target.target_path)
     setup = _set_up(registry, request)
     amortized, amortized_note = _amortized_posterior(registry, setup, search, request.target.render_set)
-    budget = search.budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
+    search = search.with_budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
     if execution.resume:
         _check_resumed_target(run_dir, request)
     start = _search_start(registry, setup, search.optimizer, amortized)
-    run_info = _identity(request, setup, budget, start)
+    run_info = _identity(request, setup, search.steps, start)
     with exclusive_directory(execution.out):  # one writer: a second refine of this --out is refused
         with (
             trial_workers(
                 setup.pipeline, setup.model.worker_spec(setup.scene), workers=execution.workers,
                 scheduler=execution.scheduler,
             ) as executor,
-            _progress(budget, enabled=progress) as on_trial,
+            _progress(search.steps, enabled=progress) as on_trial,
         ):  # fmt: skip
             result = run_refinement(
-                setup.pipeline, setup.target, start.factory, run_dir, search.config(budget), run_info=run_info,
+                setup.pipeline, setup.target, start.factory, run_dir, search, run_info=run_info,
                 resume=execution.resume, on_trial=on_trial,
             )  # fmt: skip
         _report_beside(result, setup, start, (amortized, amortized_note), executor, run_dir, search.seed)
@@ -150,7 +150,7 @@ def _set_up(registry: Registry, request: RefineRequest) -> _SetUp:
     fixed_values = fixed_by_user(pipeline, model.fixed)
     search = request.search
     # Checked before the target is read; the budget itself waits for the posterior.
-    search.config(search.budget(pipeline.phenomenon, from_posterior=False)).validate()
+    search.validate()
     target = request.target.load(registry, pipeline, model)
     if model.duration_s is None and (duration_s := target_duration(pipeline, target)) is not None:
         model = replace(model, duration_s=duration_s)

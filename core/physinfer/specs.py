@@ -1,13 +1,12 @@
 """What a refinement is asked, as four small frozen specs built once: what the model is
 (:class:`ModelSpec`), what the target is (:class:`TargetSpec`), how to search
-(:class:`SearchSpec`) and how to execute (:class:`ExecutionSpec`), bundled as a
-:class:`RefineRequest`.
+(:class:`~physinfer.refinement.SearchSpec`, the engine's record: the loop reads it as it is) and
+how to execute (:class:`ExecutionSpec`), bundled as a :class:`RefineRequest`.
 
 Each setting is declared once, as a field of one spec. The refine command's keywords are
 those fields (:meth:`RefineRequest.from_keywords`); :mod:`physinfer.api` fills the specs from
-:class:`~physinfer.api.RefineOptions` by name; the loop's
-:class:`~physinfer.refinement.RefineConfig` takes its settings from :class:`SearchSpec` by
-name (:meth:`SearchSpec.config`).
+:class:`~physinfer.api.RefineOptions` by name. ``default_budget``, once here, is
+:func:`physinfer.refinement.default_budget` (found here with a warning).
 """
 
 from __future__ import annotations
@@ -22,13 +21,16 @@ from physinfer.conditioning import Conditioning
 from physinfer.discrepancy.model import ModelFile, model_for_refine
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
+from physinfer.moved import moved_names
 from physinfer.pipeline import build_pipeline, naming_effects
-from physinfer.refinement import RefineConfig
+from physinfer.refinement import SearchSpec
 from physinfer.registry import Registry
 from physinfer.roles import Target
 from physinfer.rundir import RunDirectory
 from physinfer.target import load_target
 from physinfer.trial_workers import PipelineSpec, scene_items
+
+__getattr__ = moved_names(__name__)
 
 
 def _as_tuples(spec: Any, *names: str) -> None:
@@ -141,61 +143,6 @@ class TargetSpec:
                 pipeline, self.target_path, fps=self.fps, truth=self.truth, render_set=self.render_set or {},
                 fixed=model.fixed, conditioning=self.conditioning,
             )  # fmt: skip
-
-
-def default_budget(phenomenon: Any, steps: int | None, *, from_posterior: bool) -> int:
-    """The trials of a refinement: ``steps`` when given; otherwise the phenomenon's default,
-    or its ``default_steps_with_posterior`` when the search starts from a posterior estimator."""
-    if steps is not None:
-        return steps
-    if from_posterior and phenomenon.default_steps_with_posterior is not None:
-        return int(phenomenon.default_steps_with_posterior)
-    return int(phenomenon.default_steps)
-
-
-@dataclass(frozen=True)
-class SearchSpec:
-    """How to search: the budget, the optimizer, the noise handling, the final selection and
-    the posterior estimator the search may start from.
-
-    Attributes:
-        steps: Trials in all (``None``: :func:`default_budget`).
-        optimizer: Registered optimizer name.
-        seed: Seed of the optimizer and of every simulation.
-        noise_samples: Re-simulations of the centre whose spread the optimizer is told.
-        seeds_per_trial: Seeds each trial's distance is averaged over.
-        floor_samples: Re-simulations of the best fit for the noise floor.
-        select_top: Finalists re-simulated under fresh seeds (0: the lowest logged distance).
-        select_seeds: Fresh seeds per finalist.
-        batch_size: Trials proposed per optimizer step and simulated as one batch.
-        posterior: Posterior estimator file (``None``: the phenomenon's shipped one).
-        use_posterior: Use an estimator at all (``False``: a best fit only).
-
-    The loop's meaning of each shared setting is :class:`~physinfer.refinement.RefineConfig`'s.
-    """
-
-    steps: int | None = None
-    optimizer: str = "ax"
-    seed: int = 0
-    noise_samples: int = 3
-    seeds_per_trial: int = 1
-    floor_samples: int = 4
-    select_top: int = 0
-    select_seeds: int = 3
-    batch_size: int = 1
-    posterior: Path | None = None
-    use_posterior: bool = True
-
-    def budget(self, phenomenon: Any, *, from_posterior: bool) -> int:
-        """The trials of this search (:func:`default_budget`)."""
-        return default_budget(phenomenon, self.steps, from_posterior=from_posterior)
-
-    def config(self, steps: int) -> RefineConfig:
-        """The loop's settings for a budget of ``steps`` trials: every field of
-        :class:`~physinfer.refinement.RefineConfig` this spec has, by name."""
-        ours = {f.name for f in dataclasses.fields(self)}
-        shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(RefineConfig) if f.name in ours}
-        return RefineConfig(**{**shared, "steps": steps})
 
 
 @dataclass(frozen=True)

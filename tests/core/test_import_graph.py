@@ -93,7 +93,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.evaluation": "",
         "physinfer.pipeline": "",
         "physinfer.noise": "",
-        "physinfer.refinement": "the loop's typed records: RefineConfig, RefineResult",
+        "physinfer.refinement": "the loop's typed records: SearchSpec, RefineResult",
         "physinfer.resimulation": "",
         "physinfer.loop": "",
         "physinfer.rundir": "",

@@ -10,7 +10,7 @@ from physinfer.evaluation import Pipeline
 from physinfer.loop import run_refinement
 from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
-from physinfer.refinement import RefineConfig
+from physinfer.refinement import SearchSpec
 from physinfer.resimulation import select_best
 from physinfer.roles import Embedder, Renderer, Simulator, Target
 from physinfer.rundir import SELECTION_FILE, RunDirectory, TrialRecord
@@ -99,6 +99,11 @@ def test_noise_floor_needs_two_seeds():
         measure_noise_floor(pipeline(0.1), {"a": 1.0}, {}, seeds=[1])
 
 
+def loop_config(**settings):
+    """A search that measures no noise unless asked (the command's defaults measure both)."""
+    return SearchSpec(**{"noise_samples": 0, "floor_samples": 0, **settings})
+
+
 def run(tmp_path, config):
     target = Target(clip=PassRenderer().render(NoisySimulator(0.0).simulate({"a": 1.3})), truth={"a": 1.3}, render_params={})
     from physinfer.optimizers.random import RandomOptimizer
@@ -110,7 +115,7 @@ def run(tmp_path, config):
 
 
 def test_refinement_measures_the_observation_noise_and_reports_the_floor(tmp_path):
-    result = run(tmp_path, RefineConfig(steps=6, optimizer="random", noise_samples=4, floor_samples=4))
+    result = run(tmp_path, loop_config(steps=6, optimizer="random", noise_samples=4, floor_samples=4))
     prior = json.loads((tmp_path / "run" / "noise_prior.json").read_text())
     assert prior["sem"] > 0 and result.extra["observation_sem"] == prior["sem"]
     floor = result.extra["noise_floor"]
@@ -120,7 +125,7 @@ def test_refinement_measures_the_observation_noise_and_reports_the_floor(tmp_pat
 def test_noise_seeds_of_none_is_empty():
     # n = 0 once returned four seeds, so every trial of a refinement was simulated five times.
     assert noise_seeds(0, 0) == [] and noise_seeds(3, -1) == []
-    assert RefineConfig(seed=5).trial_seeds() == [5]
+    assert loop_config(seed=5).trial_seeds() == [5]
 
 
 @pytest.mark.parametrize("seeds_per_trial", [1, 3])
@@ -134,11 +139,11 @@ def test_seeds_per_trial_costs_that_many_simulations_per_trial(tmp_path, monkeyp
         return original(self, params, seed=seed)
 
     monkeypatch.setattr(NoisySimulator, "simulate", counting)
-    result = run(tmp_path, RefineConfig(steps=3, optimizer="random", seeds_per_trial=seeds_per_trial))
+    result = run(tmp_path, loop_config(steps=3, optimizer="random", seeds_per_trial=seeds_per_trial))
     assert "noise_floor" not in result.extra and result.extra["observation_sem"] is None
     assert len(seeds_seen) == 3 * seeds_per_trial
-    assert seeds_seen[:seeds_per_trial] == RefineConfig(seeds_per_trial=seeds_per_trial).trial_seeds()
-    assert RefineConfig(seeds_per_trial=3, seed=5).trial_seeds()[0] == 5
+    assert seeds_seen[:seeds_per_trial] == loop_config(seeds_per_trial=seeds_per_trial).trial_seeds()
+    assert loop_config(seeds_per_trial=3, seed=5).trial_seeds()[0] == 5
 
 
 @pytest.mark.parametrize(
@@ -147,7 +152,7 @@ def test_seeds_per_trial_costs_that_many_simulations_per_trial(tmp_path, monkeyp
 )
 def test_bad_noise_settings_are_user_errors(field, value):
     with pytest.raises(UserInputError, match=field.replace("_", "-")):
-        RefineConfig(**{field: value}).validate()
+        loop_config(**{field: value}).validate()
 
 
 def _record(step, a, distance):
@@ -169,7 +174,7 @@ def test_selection_re_simulates_the_finalists_and_undoes_a_lucky_seed(tmp_path, 
         return original(self, params, seed=seed)
 
     monkeypatch.setattr(NoisySimulator, "simulate", counting)
-    config = RefineConfig(seed=4, select_top=3, select_seeds=2)
+    config = loop_config(seed=4, select_top=3, select_seeds=2)
     target_embedding = MeanEmbedder().embed(target.clip)
     selection = select_best(records, pipeline(0.01), target, target_embedding, run_dir, config)
     # Finalists: the three best *distinct* θ (step 3 repeats step 2's θ); fresh seeds only.
@@ -186,7 +191,7 @@ def test_selection_re_simulates_the_finalists_and_undoes_a_lucky_seed(tmp_path, 
 
 
 def test_refinement_with_selection_reports_the_chosen_trial(tmp_path):
-    result = run(tmp_path, RefineConfig(steps=6, optimizer="random", select_top=3, select_seeds=2))
+    result = run(tmp_path, loop_config(steps=6, optimizer="random", select_top=3, select_seeds=2))
     selection = result.extra["selection"]
     assert len(selection["finalists"]) == 3 and selection["selection_s"] >= 0
     assert all(len(f["resimulated"]) == 2 for f in selection["finalists"])

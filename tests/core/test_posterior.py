@@ -499,8 +499,8 @@ def test_a_search_from_a_posterior_takes_the_phenomenons_shorter_default_budget(
     import dataclasses
 
     from physinfer.plugins import load_registry
+    from physinfer.refinement import default_budget
     from physinfer.session import refine
-    from physinfer.specs import default_budget
 
     path, _ = pendulum_estimator
     registry, _ = load_registry()

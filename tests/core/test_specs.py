@@ -10,8 +10,8 @@ import pytest
 
 from physinfer.api import RefineOptions
 from physinfer.api import _refine_request as refine_request
-from physinfer.refinement import RefineConfig
-from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
+from physinfer.refinement import SearchSpec
+from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
 
 SPECS = (ModelSpec, TargetSpec, SearchSpec, ExecutionSpec)
 
@@ -39,13 +39,18 @@ def test_the_keywords_go_to_the_spec_that_declares_them():
         RefineRequest.from_keywords(plugin="pendulum_lab")
 
 
-def test_the_loop_takes_every_search_setting_it_has_by_name():
-    search = SearchSpec(optimizer="random", seed=7, noise_samples=0, seeds_per_trial=2, floor_samples=0,
-                        select_top=3, select_seeds=5, batch_size=4)  # fmt: skip
-    shared = (_names(RefineConfig) & _names(SearchSpec)) - {"steps"}
-    assert shared == {"optimizer", "seed", "noise_samples", "seeds_per_trial", "floor_samples", "select_top",
-                      "select_seeds", "batch_size"}  # fmt: skip
-    assert search.config(9) == RefineConfig(steps=9, **{name: getattr(search, name) for name in shared})
+def test_the_loop_runs_the_search_record_itself_with_its_budget_resolved():
+    class Phenomenon:
+        default_steps, default_steps_with_posterior = 20, 8
+
+    search = SearchSpec(optimizer="random", seed=7, select_top=3, batch_size=4)
+    assert search.steps is None
+    assert search.with_budget(Phenomenon, from_posterior=True) == dataclasses.replace(search, steps=8)
+    assert search.with_budget(Phenomenon, from_posterior=False).steps == 20
+    assert dataclasses.replace(search, steps=5).with_budget(Phenomenon, from_posterior=True).steps == 5
+    # The command's options declare every search setting but the engine's own two.
+    options = {f.name for f in dataclasses.fields(RefineOptions)}
+    assert _names(SearchSpec) - options - {"use_posterior"} == {"noise_sem", "log_objective"}
 
 
 def test_the_api_fills_every_spec_from_the_options():

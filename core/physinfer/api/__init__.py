@@ -56,10 +56,10 @@ from physinfer.outputs import OutputFolder
 from physinfer.parameters import parse_float_assignments
 from physinfer.pipeline import build_pipeline, naming_effects
 from physinfer.progress import StageProgress
-from physinfer.refinement import RefineResult
+from physinfer.refinement import RefineResult, SearchSpec
 from physinfer.scene import scene_of
 from physinfer.session import run as run_refine
-from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, SearchSpec, TargetSpec
+from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
 from physinfer.video import write_video
 
 if TYPE_CHECKING:  # their modules import torch and sbi: imported when the function runs
@@ -231,8 +231,10 @@ _Spec = TypeVar("_Spec")
 
 
 def _spec(kind: type[_Spec], options: Any, **given: Any) -> _Spec:
-    """A ``kind`` spec: ``given``, and each of its other fields the option of the same name."""
-    names = [f.name for f in dataclasses.fields(kind)]  # type: ignore[arg-type]
+    """A ``kind`` spec: ``given``, and each of its other fields the option of the same name;
+    a field no option declares (the search's ``noise_sem``, ``log_objective``: the engine's
+    own) keeps the spec's default."""
+    names = [f.name for f in dataclasses.fields(kind) if f.name in given or hasattr(options, f.name)]  # type: ignore[arg-type]
     return kind(**{name: given[name] if name in given else getattr(options, name) for name in names})
 
 

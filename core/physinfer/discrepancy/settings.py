@@ -17,7 +17,7 @@ from physinfer.discrepancy.decide import DecisionRule
 from physinfer.discrepancy.localise import LocaliseConfig
 from physinfer.errors import UserInputError
 from physinfer.parameters import refuse_repeats
-from physinfer.refinement import RefineConfig
+from physinfer.refinement import SearchSpec
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ class DiagnoseSettings:
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
         batch_size: Trials per optimizer step of every stage, simulated as one batch (see
-            :class:`physinfer.refinement.RefineConfig`); ``None``: the phenomenon's
+            :class:`physinfer.refinement.SearchSpec`); ``None``: the phenomenon's
             ``diagnose_batch_size`` (:class:`physinfer.roles.Phenomenon`).
         calibrate: Run the self-consistency refinements (the null scale's optimizer part).
         calibration_runs: ``R``, self-consistency refinements; ``rule.calibration_summary``
@@ -183,7 +183,7 @@ class DiagnoseSettings:
                 f"--floor-samples must be at least 4 (the rank test needs them), got {self.floor_samples}"
             )
         batch = 1 if self.batch_size is None else self.batch_size  # None: the phenomenon's, checked there
-        RefineConfig(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=batch).validate()
+        SearchSpec(select_top=self.select_top, select_seeds=self.select_seeds, batch_size=batch).validate()
         if self.workers is not None and self.workers < 0:
             raise UserInputError(f"--workers must be 0 (in this process) or more, got {self.workers}")
         if self.calibration_runs < 1:

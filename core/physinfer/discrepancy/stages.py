@@ -35,7 +35,7 @@ from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
 from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.pipeline import EffectParameterError, build_pipeline, fixed_by_user
-from physinfer.refinement import RefineConfig, RefineResult
+from physinfer.refinement import RefineResult, SearchSpec
 from physinfer.registry import Registry
 from physinfer.roles import Effect, Target
 from physinfer.rundir import RUN_FILE, RunDirectory, TrialRecord, optional_settings
@@ -168,8 +168,9 @@ def run_stage(
     scene = scene_of(pipeline.phenomenon)
     if scene is not None:  # recorded only when given: diagnoses from before scenes stay resumable
         run_info["scene"] = scene
-    config = RefineConfig(
-        steps=steps, optimizer=settings.optimizer, seed=seed,
+    # No noise measured in the loop: the stage's gap and its noise floor are measured apart.
+    config = SearchSpec(
+        steps=steps, optimizer=settings.optimizer, seed=seed, noise_samples=0, floor_samples=0,
         select_top=settings.select_top, select_seeds=settings.select_seeds, batch_size=settings.batch_size,
     )  # fmt: skip
     resume = run_dir.run_file.is_file()
