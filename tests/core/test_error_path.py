@@ -6,10 +6,15 @@ from __future__ import annotations
 
 import json
 import resource
+import signal
 import subprocess
 import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
 
+import psutil
 import typer
 from typer.testing import CliRunner
 
@@ -110,3 +115,55 @@ def test_square_brackets_in_the_users_text_are_printed_as_they_are(physinfer_cli
     ran = physinfer_cli("simulate", "--plugin", "pendulum_lab", "--render-set", "size=32", "--out", video)
     assert ran.returncode == 0, ran.stderr
     assert str(video) in ran.stderr
+
+
+def _kill_the_first_pool_worker(stop: threading.Event) -> None:
+    """SIGKILL the first spawned pool worker of this process, as the kernel's OOM killer would."""
+    me = psutil.Process()
+    while not stop.is_set():
+        for child in me.children(recursive=True):
+            try:
+                if "spawn_main" in " ".join(child.cmdline()):  # not multiprocessing's resource tracker
+                    child.send_signal(signal.SIGKILL)
+                    return
+            except psutil.Error:
+                continue
+        time.sleep(0.02)
+
+
+def test_a_worker_killed_mid_run_is_one_error_line_that_says_how_to_go_on(physinfer_cli, tmp_path):
+    stop = threading.Event()
+    killer = threading.Thread(target=_kill_the_first_pool_worker, args=(stop,), daemon=True)
+    killer.start()
+    try:
+        ran = physinfer_cli(
+            "refine", "--plugin", "pendulum_lab", "--steps", "8", "--optimizer", "random", "--workers", "1",
+            "--no-posterior", "--out", str(tmp_path / "run"),
+        )  # fmt: skip
+    finally:
+        stop.set()
+        killer.join(timeout=10)
+    assert ran.returncode == 1, ran.stderr[-2000:]
+    line = _one_error_line(ran.stderr)
+    assert "a worker process stopped abruptly (BrokenProcessPool)" in line
+    assert "memory" in line and "--workers 0 runs in this process" in line and "continue with --resume" in line
+    assert not list(Path(tempfile.gettempdir()).glob("physinfer-errors/*BrokenProcessPool*"))  # not a bug report
+
+
+def test_an_interrupted_command_says_what_it_keeps_and_only_that():
+    from physinfer.cli.common import handle_errors
+
+    def interrupted() -> None:
+        raise KeyboardInterrupt
+
+    said = {}
+    for name, decorate in {
+        "infer": handle_errors(),
+        "refine": handle_errors(kept="completed trials are saved: continue with --resume"),
+    }.items():
+        app = typer.Typer()
+        app.command()(decorate(interrupted))
+        ran = CliRunner().invoke(app, [])
+        assert ran.exit_code == 130
+        said[name] = ran.output.strip()
+    assert said == {"infer": "interrupted", "refine": "interrupted; completed trials are saved: continue with --resume"}

@@ -16,8 +16,9 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import BrokenExecutor
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import typer
 from typer.core import TyperGroup
@@ -57,7 +58,9 @@ TRACEBACK_DIR = "physinfer-errors"
 
 def handle_errors(
     as_json_param: str = "as_json",
-    interrupted: str = "interrupted; completed trials are saved — continue with --resume",
+    interrupted: str | None = None,
+    *,
+    kept: str | None = None,
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Give a command the one error path of the CLI.
 
@@ -68,10 +71,16 @@ def handle_errors(
     before the command runs, for every command alike, plugins' included
     (:func:`physinfer.settings.check_seed`).
 
+    A worker process that died (killed, most often for want of memory) is one line too, exit
+    status 1: what happened, the memory left, fewer ``--workers``, and ``kept``.
+
     Args:
         as_json_param: The command's keyword argument that is ``--json``.
-        interrupted: What to say on Ctrl-C (exit status 130).
+        interrupted: What to say on Ctrl-C (exit status 130; ``None``: ``interrupted`` and ``kept``).
+        kept: What an interrupted run keeps and how to continue it (``refine``: its trials,
+            ``--resume``); ``None``: the command keeps nothing to continue from.
     """
+    stopped = interrupted or "; ".join(filter(None, ("interrupted", kept)))
 
     def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
         @functools.wraps(func)
@@ -82,26 +91,21 @@ def handle_errors(
                     check_seed(kwargs["seed"])
                 return func(*args, **kwargs)
             except (UserInputError, PhysinferError) as exc:
-                say_error(str(exc))
-                if as_json:
-                    emit_json({"error": str(exc)})
-                raise typer.Exit(2) from None
+                _fail(str(exc), as_json, 2)
             except OSError as exc:
                 if exc.errno not in DISK_FULL:
                     report_internal_error(exc, as_json=as_json)
                     raise typer.Exit(1) from None
-                message = disk_full_message(exc)
-                say_error(message)
-                if as_json:
-                    emit_json({"error": message})
-                raise typer.Exit(2) from None
+                _fail(disk_full_message(exc), as_json, 2)
             except KeyboardInterrupt:
-                err_console.print(interrupted, highlight=False)
+                err_console.print(stopped, highlight=False)
                 raise typer.Exit(130) from None
             except _TYPER_FLOW:
                 raise
-            except Exception as exc:  # a bug: one line and a saved traceback, not a raw dump
-                report_internal_error(exc, as_json=as_json)
+            except Exception as exc:
+                if isinstance(exc, BrokenExecutor) or type(exc).__name__ == "KilledWorker":  # Dask's word
+                    _fail(worker_died_message(exc, kept), as_json, 1)  # killed (memory), not a bug of ours
+                report_internal_error(exc, as_json=as_json)  # a bug: one line and a saved traceback
                 raise typer.Exit(1) from None
 
         wrapper._physinfer_errors = True  # type: ignore[attr-defined]
@@ -120,6 +124,38 @@ def disk_full_message(exc: OSError) -> str:
             "limit (ulimit -f)", errno.EDQUOT: "disk quota exceeded"}.get(exc.errno or 0, str(exc))  # fmt: skip
     where = f" writing {exc.filename}" if exc.filename else ""
     return f"{what}{where}; free space (or raise the limit) and run the command again"
+
+
+def _fail(message: str, as_json: bool, status: int) -> NoReturn:
+    """Say ``message`` as the one error line (and as ``{"error": ...}`` with ``--json``); exit."""
+    say_error(message)
+    if as_json:
+        emit_json({"error": message})
+    raise typer.Exit(status) from None
+
+
+def worker_died_message(exc: BaseException, kept: str | None) -> str:
+    """One line for a worker process that stopped abruptly: most often the kernel killed it
+    for memory, which the parent cannot see; the memory available now is the clue."""
+    available = available_memory_gib()
+    memory = f"{available:.1f} GiB of memory available now" if available is not None else "memory unknown"
+    parts = [
+        f"a worker process stopped abruptly ({type(exc).__name__}); the machine may have run out of "
+        f"memory ({memory})",
+        "give fewer --workers (--workers 0 runs in this process) or free memory",
+    ]
+    return "; ".join([*parts, kept] if kept else parts)
+
+
+def available_memory_gib() -> float | None:
+    """``MemAvailable`` of ``/proc/meminfo`` in GiB (``None`` where there is none)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) / 2**20
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def _json_given() -> bool:

@@ -98,7 +98,7 @@ _VerifyOpt = Annotated[
 
 
 @dataset_app.command("generate")
-@handle_errors(interrupted="interrupted; finished units are saved: run the same command again to resume")
+@handle_errors(kept="finished units are saved: run the same command again to resume")
 def generate_cmd(
     plugin: _PluginOpt,
     out: _OutOpt,

@@ -168,7 +168,7 @@ _SchedulerOpt = Annotated[
 ]
 
 
-@handle_errors()
+@handle_errors(kept="finished stages are saved: run the same command again to continue")
 def diagnose_cmd(
     plugin: PluginOpt,
     target: _TargetOpt = None,

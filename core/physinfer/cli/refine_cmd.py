@@ -128,7 +128,7 @@ _NoRenderEstimateOpt = Annotated[
 ]
 
 
-@handle_errors()
+@handle_errors(kept="completed trials are saved: continue with --resume")
 def refine_cmd(
     plugin: PluginOpt,
     target: _TargetOpt = None,

@@ -162,7 +162,7 @@ def _train_folder(out: Path) -> Any:
     return OutputFolder(out, "train", outputs, resumes=True, example="sdn")
 
 
-@handle_errors()
+@handle_errors(kept="finished epochs are saved: run the same command again to continue")
 def train_cmd(
     plugin: PluginOpt,
     data: DataOpt,
