@@ -28,10 +28,11 @@ def _entries(old: str, new: str, names: str) -> dict[str, str]:
 #: path (issue 47: records and helpers moved below the code that uses them).
 MOVED: Mapping[str, str] = MappingProxyType({
     **_entries("physinfer.loop", "physinfer.evaluation",
-               "NON_FINITE NON_FINITE_DISTANCE ClipEmbedder Pipeline evaluate evaluate_mean make_clips "
-               "simulate_and_embed simulate_many simulate_one squared_distance"),
-    **_entries("physinfer.loop", "physinfer.resimulation", "SELECTION_SEED_SALT"),
-    **_entries("physinfer.loop", "physinfer.rundir", "NOISE_PRIOR_FILE SELECTION_FILE RunDirectory"),
+               "NON_FINITE NON_FINITE_DISTANCE ClipEmbedder Pipeline evaluate_mean make_clips "
+               "simulate_and_embed simulate_many simulate_one"),
+    **_entries("physinfer.resimulation", "physinfer.loop",
+               "SELECTION_SEED_SALT final_noise_floor observation_noise select_best"),
+    **_entries("physinfer.loop", "physinfer.rundir", "RunDirectory"),
     "physinfer.loop.RefineConfig": "physinfer.refinement.SearchSpec",
     "physinfer.refinement.RefineConfig": "physinfer.refinement.SearchSpec",
     **_entries("physinfer.session", "physinfer.pipeline",

@@ -2,10 +2,9 @@
 (:class:`RefineResult`), with what it reports beside the best fit in typed sections
 (:class:`NoiseReport`, :class:`FitPlace`, :class:`TargetReport`, :class:`TargetPosterior`).
 
-Below the loop (:mod:`physinfer.loop`) and its re-simulations (:mod:`physinfer.resimulation`),
-so that both, the commands and the diagnosis read them from one place. ``RefineConfig``, the
-loop's settings before they became the search's one record, is found here with a warning
-(:data:`physinfer.moved.MOVED`).
+Below the loop (:mod:`physinfer.loop`), so that the loop, the commands and the diagnosis read
+them from one place. ``RefineConfig``, the loop's settings before they became the search's one
+record, is found here with a warning (:data:`physinfer.moved.MOVED`).
 """
 
 from __future__ import annotations
@@ -64,7 +63,7 @@ class SearchSpec:
         select_top: After the run, re-simulate the best ``M`` trials (distinct θ) under
             ``select_seeds`` fresh seeds each and report the one with the lowest mean
             fresh distance as the best (0: the lowest logged distance; see
-            :func:`physinfer.resimulation.select_best`).
+            :func:`physinfer.loop.select_best`).
         select_seeds: Fresh seeds per finalist of the selection.
         batch_size: Trials proposed per optimizer step and simulated as one batch (q);
             1 proposes, simulates and tells one trial at a time (the paper's loop).

@@ -273,6 +273,16 @@ def _read_colour_only(renderer: Any) -> None:
     renderer._read_main_framebuffer = read
 
 
+def _handle(pointer: Any) -> int | None:
+    """An EGL handle's address (``None`` for none: ``EGL_NO_CONTEXT``, a null pointer)."""
+    import ctypes
+
+    if pointer is None:
+        return None
+    address = pointer if isinstance(pointer, int) else ctypes.cast(pointer, ctypes.c_void_p).value
+    return int(address) if address else None
+
+
 def _release_egl_context_only(renderer: Any) -> None:
     """Free an ``OffscreenRenderer``'s GL objects and EGL context, keeping the EGL display.
 
@@ -280,13 +290,29 @@ def _release_egl_context_only(renderer: Any) -> None:
     which every EGL context of the process shares: it would invalidate the contexts of
     all other open renderers (``eglMakeCurrent`` then fails with EGL_BAD_DISPLAY).
     """
-    from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+    from OpenGL.EGL import (
+        EGL_DRAW,
+        EGL_NO_CONTEXT,
+        EGL_NO_SURFACE,
+        EGL_READ,
+        eglDestroyContext,
+        eglGetCurrentContext,
+        eglGetCurrentDisplay,
+        eglGetCurrentSurface,
+        eglMakeCurrent,
+    )
 
     platform = renderer._platform
+    # The context current before, restored after: a renderer closed by the garbage collector
+    # (one a failed run never closed) may close in the middle of another's render, whose
+    # next GL call would then find no context ("Link failure (0)" compiling a shader).
+    was = (eglGetCurrentDisplay(), eglGetCurrentSurface(EGL_DRAW), eglGetCurrentSurface(EGL_READ), eglGetCurrentContext())
     platform.make_current()
     renderer._renderer.delete()
     eglMakeCurrent(platform._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
     eglDestroyContext(platform._egl_display, platform._egl_context)
+    if _handle(was[3]) not in (None, _handle(platform._egl_context)):
+        eglMakeCurrent(*was)
     platform._egl_context = None
     platform._egl_display = None
     renderer._renderer = None

@@ -95,24 +95,26 @@ def run(registry: Registry, request: RefineRequest, *, progress: Progress = True
     search = search.with_budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
     if execution.resume:
         _check_resumed_target(run_dir, request)
-    start = _search_start(registry, setup, search.optimizer, amortized)
-    run_info = _identity(request, setup, search.steps, start)
-    with exclusive_directory(execution.out):  # one writer: a second refine of this --out is refused
-        with (
-            trial_workers(
-                setup.pipeline, setup.model.worker_spec(setup.scene), workers=execution.workers,
-                scheduler=execution.scheduler,
-            ) as executor,
-            _progress(search.steps, enabled=progress) as on_trial,
-        ):  # fmt: skip
-            result = run_refinement(
-                setup.pipeline, setup.target, start.factory, run_dir, search, run_info=run_info,
-                resume=execution.resume, on_trial=on_trial,
-            )  # fmt: skip
-        _report_beside(result, setup, start, (amortized, amortized_note), executor, run_dir, search.seed)
-        write_video(run_dir.path / TARGET_FILE, setup.target.clip)
-        write_outputs(result, setup.pipeline, setup.target, run_dir, search.seed)
-    setup.pipeline.renderer.close()
+    try:  # the renderer's GL context is released even when the run fails
+        start = _search_start(registry, setup, search.optimizer, amortized)
+        run_info = _identity(request, setup, search.steps, start)
+        with exclusive_directory(execution.out):  # one writer: a second refine of this --out is refused
+            with (
+                trial_workers(
+                    setup.pipeline, setup.model.worker_spec(setup.scene), workers=execution.workers,
+                    scheduler=execution.scheduler,
+                ) as executor,
+                _progress(search.steps, enabled=progress) as on_trial,
+            ):  # fmt: skip
+                result = run_refinement(
+                    setup.pipeline, setup.target, start.factory, run_dir, search, run_info=run_info,
+                    resume=execution.resume, on_trial=on_trial,
+                )  # fmt: skip
+            _report_beside(result, setup, start, (amortized, amortized_note), executor, run_dir, search.seed)
+            write_video(run_dir.path / TARGET_FILE, setup.target.clip)
+            write_outputs(result, setup.pipeline, setup.target, run_dir, search.seed)
+    finally:
+        setup.pipeline.renderer.close()
     return result
 
 

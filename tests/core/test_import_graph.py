@@ -94,7 +94,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.pipeline": "",
         "physinfer.noise": "",
         "physinfer.refinement": "the loop's typed records: SearchSpec, RefineResult",
-        "physinfer.resimulation": "",
+        "physinfer.resimulation": "old names of the loop's re-simulations (physinfer.moved)",
         "physinfer.loop": "",
         "physinfer.rundir": "",
         "physinfer.plotting": "a run's own figure, drawn from its trial records",

@@ -7,11 +7,10 @@ import pytest
 
 from physinfer.errors import UserInputError
 from physinfer.evaluation import Pipeline
-from physinfer.loop import run_refinement
+from physinfer.loop import run_refinement, select_best
 from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.refinement import SearchSpec
-from physinfer.resimulation import select_best
 from physinfer.roles import Embedder, Renderer, Simulator, Target
 from physinfer.rundir import SELECTION_FILE, RunDirectory, TrialRecord
 from physinfer.types import Clip, Trajectory

@@ -262,3 +262,29 @@ def test_a_sequence_needs_one_frame_count_and_its_own_scene() -> None:
             context.render_sequence(scene, poses={carrier: poses})
     finally:
         context.close()
+
+
+def test_closing_a_context_leaves_the_one_in_use_current() -> None:
+    """A renderer closed while another renders (the garbage collector closing one that a
+    failed run left open) used to leave no context current: the other's next GL call failed
+    ("Link failure (0)" compiling a shader, seen once in the test suite)."""
+    from OpenGL.EGL import eglGetCurrentContext
+    from pyrender.constants import RenderFlags
+
+    from physinfer.rendering import _handle
+
+    scene, _ = triangle_scene()
+    other_scene, _ = triangle_scene(offset=0.1)
+    in_use, leaked = OffscreenContext(32, 32), OffscreenContext(32, 32)
+    try:
+        first = in_use.render(scene)
+        leaked.render(other_scene)
+        in_use._renderer._platform.make_current()  # in the middle of its render
+        current = _handle(eglGetCurrentContext())
+        leaked.close()
+        assert current is not None and _handle(eglGetCurrentContext()) == current
+        colour, _ = in_use._renderer._renderer.render(scene, RenderFlags.OFFSCREEN)  # no make_current again
+        np.testing.assert_array_equal(colour, first)
+    finally:
+        in_use.close()
+        leaked.close()

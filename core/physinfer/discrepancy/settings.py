@@ -84,7 +84,7 @@ class DiagnoseSettings:
         floor_samples: ``K``, re-simulations per gap measurement (at least 4 for the rank test).
         select_top: Every stage re-simulates its best ``M`` trials under ``select_seeds``
             fresh seeds and keeps the lowest mean (0: the lowest logged distance; see
-            :func:`physinfer.resimulation.select_best`). For chaotic phenomena it keeps the
+            :func:`physinfer.loop.select_best`). For chaotic phenomena it keeps the
             winner's curse out of every stage's best fit, the calibration runs' included.
         select_seeds: Fresh seeds per finalist.
         batch_size: Trials per optimizer step of every stage, simulated as one batch (see
