@@ -130,7 +130,7 @@ _AcceptMiscalibratedOpt = Annotated[
 
 
 @posterior_app.command("train")
-@handle_errors()
+@handle_errors(kept="embedded clips are cached in the dataset: run the same command again to continue")
 def train_cmd(
     plugin: PluginOpt,
     data: _DataOpt,
