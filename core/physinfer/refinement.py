@@ -92,13 +92,9 @@ class SearchSpec:
     noise_sem: float | None = None
     log_objective: bool = True
 
-    def budget(self, phenomenon: Any, *, from_posterior: bool) -> int:
-        """The trials of this search (:func:`default_budget`)."""
-        return default_budget(phenomenon, self.steps, from_posterior=from_posterior)
-
     def with_budget(self, phenomenon: Any, *, from_posterior: bool) -> SearchSpec:
-        """This search with its budget resolved (:meth:`budget`): what the loop runs."""
-        return replace(self, steps=self.budget(phenomenon, from_posterior=from_posterior))
+        """This search with its budget resolved (:func:`default_budget`): what the loop runs."""
+        return replace(self, steps=default_budget(phenomenon, self.steps, from_posterior=from_posterior))
 
     def objective(self, distance: float | None) -> float | None:
         """The value told to the optimizer for a distance (``None`` stays ``None``)."""

@@ -91,11 +91,12 @@ def run(registry: Registry, request: RefineRequest, *, progress: Progress = True
     execution, search = request.execution, request.search
     run_dir = execution.run_directory(request.target.target_path)
     setup = _set_up(registry, request)
-    amortized, amortized_note = _amortized_posterior(registry, setup, search, request.target.render_set)
-    search = search.with_budget(setup.pipeline.phenomenon, from_posterior=amortized is not None and setup.model_file is None)
-    if execution.resume:
-        _check_resumed_target(run_dir, request)
     try:  # the renderer's GL context is released even when the run fails
+        amortized, amortized_note = _amortized_posterior(registry, setup, search, request.target.render_set)
+        from_posterior = amortized is not None and setup.model_file is None
+        search = search.with_budget(setup.pipeline.phenomenon, from_posterior=from_posterior)
+        if execution.resume:
+            _check_resumed_target(run_dir, request)
         start = _search_start(registry, setup, search.optimizer, amortized)
         run_info = _identity(request, setup, search.steps, start)
         with exclusive_directory(execution.out):  # one writer: a second refine of this --out is refused

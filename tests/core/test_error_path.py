@@ -9,7 +9,6 @@ import resource
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -147,7 +146,7 @@ def test_a_worker_killed_mid_run_is_one_error_line_that_says_how_to_go_on(physin
     line = _one_error_line(ran.stderr)
     assert "a worker process stopped abruptly (BrokenProcessPool)" in line
     assert "memory" in line and "--workers 0 runs in this process" in line and "continue with --resume" in line
-    assert not list(Path(tempfile.gettempdir()).glob("physinfer-errors/*BrokenProcessPool*"))  # not a bug report
+    assert "internal error" not in line and "traceback saved" not in line  # not filed as a bug of ours
 
 
 def test_an_interrupted_command_says_what_it_keeps_and_only_that():
