@@ -123,7 +123,7 @@ def make_target(registry: Any, plugin: str, hidden: str | None, seed: int, rende
     far end of their range (:func:`physinfer.discrepancy.ladder.strength_path`; the power
     curves) instead of a random realistic strength.
     """
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.video import write_video
 
     pipeline = build_pipeline(registry, plugin, effects=[hidden] if hidden else [], embedder="")
@@ -172,8 +172,7 @@ def ladder_case(registry: Any, plugin: str, seed: int, args: argparse.Namespace)
     from physinfer.discrepancy.ladder import LimitInputs
     from physinfer.discrepancy.limits import detection_limits
     from physinfer.discrepancy.settings import LimitConfig
-    from physinfer.noise import measure_noise_floor, noise_seeds
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline, measure_noise_floor, noise_seeds
 
     t0 = time.perf_counter()
     base = build_pipeline(registry, plugin, embedder=args.embedder, embedder_frames=args.embedder_frames)

@@ -134,7 +134,7 @@ def localisation_features(clip: Any) -> np.ndarray:
 
 def visibility(registry: Any, effect: str, wind: float, args: argparse.Namespace) -> dict[str, Any]:
     """Distances to an effect-on target from ``K`` re-simulations with the effect on and off."""
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
 
     embedder = args.embedder if args.features == "embedder" else ""
     pipeline = build_pipeline(registry, "flag_visibility", effects=[effect], embedder=embedder,

@@ -107,7 +107,7 @@ def _target_inputs(n: int, photo: str | None, folder: Path) -> dict[str, list[di
     camera), keeping the flow input ``infer`` sampled at."""
     import bench_posterior_targets as bench
 
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.posterior import estimator as estimator_module
     from physinfer.video import write_video

@@ -224,8 +224,8 @@ def main() -> None:
         print(json.dumps({"summary": summarise(rows), "rows": len(rows)}, indent=1))
         return
 
+    from physinfer.evaluation import build_pipeline
     from physinfer.parameters import parse_assignments
-    from physinfer.pipeline import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.scene import parse_scene_set
     from physinfer.video import write_video

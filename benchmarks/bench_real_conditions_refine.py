@@ -46,8 +46,8 @@ import bench_real_conditions as brc  # noqa: E402
 import bench_refine  # noqa: E402
 
 from physinfer.conditioning import Conditioning, condition_target  # noqa: E402
+from physinfer.evaluation import build_pipeline  # noqa: E402
 from physinfer.framing import PrepareSettings, prepare_clip  # noqa: E402
-from physinfer.pipeline import build_pipeline  # noqa: E402
 from physinfer.plugins import load_registry  # noqa: E402
 from physinfer.render_estimate import estimate_render_params  # noqa: E402
 from physinfer.roles import Target  # noqa: E402

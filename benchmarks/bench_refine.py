@@ -55,10 +55,10 @@ from typing import Any
 
 import numpy as np
 
+from physinfer.evaluation import build_pipeline
 from physinfer.fixed import split_fixed
 from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
-from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.refinement import SearchSpec
 from physinfer.roles import Target

@@ -37,8 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from physinfer.conditioning import Conditioning
-from physinfer.evaluation import squared_distance
-from physinfer.pipeline import build_pipeline
+from physinfer.evaluation import build_pipeline, squared_distance
 from physinfer.plugins import load_registry
 from physinfer.roles import Target
 from physinfer.session import refine

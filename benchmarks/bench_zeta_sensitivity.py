@@ -26,8 +26,7 @@ import time
 
 import numpy as np
 
-from physinfer.evaluation import squared_distance
-from physinfer.pipeline import build_pipeline
+from physinfer.evaluation import build_pipeline, squared_distance
 from physinfer.plugins import load_registry
 
 #: ``{label: (low ζ overrides, high ζ overrides)}`` over the dataset's ranges.

@@ -48,7 +48,7 @@ import numpy as np
 
 from physinfer.as_given import camera
 from physinfer.errors import SimulationFailed
-from physinfer.noise import noise_seeds
+from physinfer.evaluation import noise_seeds
 from physinfer.types import Clip
 from physinfer.video import center_crop_resize, grid_luminance
 

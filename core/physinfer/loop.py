@@ -32,10 +32,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from physinfer.errors import SimulationFailed, UserInputError
-from physinfer.evaluation import evaluate, evaluate_batch, squared_distance
+from physinfer.evaluation import (
+    evaluate,
+    evaluate_batch,
+    measure_noise_floor,
+    noise_seeds,
+    squared_distance,
+)
 from physinfer.io import atomic_write_json, read_keyed_json
 from physinfer.moved import moved_names
-from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.refinement import FitPlace, NoiseReport, RefineResult, SearchSpec
 from physinfer.roles import Optimizer, Target, Trial
 from physinfer.rundir import (

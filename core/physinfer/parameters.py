@@ -26,7 +26,7 @@ class UnknownParameterError(UserInputError):
 
     Attributes:
         name: The name or pattern as the user gave it; a caller that knows the phenomenon's
-            effects can say which one it belongs to (:func:`physinfer.pipeline.naming_effects`).
+            effects can say which one it belongs to (:func:`physinfer.evaluation.naming_effects`).
     """
 
     def __init__(self, message: str, name: str) -> None:

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
+from physinfer.evaluation import noise_seeds
 from physinfer.moved import moved_names
-from physinfer.noise import noise_seeds
 from physinfer.plotting import refinement_figure
 from physinfer.rundir import TrialRecord
 

@@ -3,7 +3,7 @@ bounded memory, the part ``--start``/``--end`` chose: :func:`read_target_video`)
 conditioned (framed, its ζ estimated; :mod:`physinfer.conditioning`) and given its truth.
 
 Reading and conditioning a user's video is the footage floor's work, so it sits here, above
-the engine (:mod:`physinfer.pipeline` builds the roles; the loop takes the
+the engine (:mod:`physinfer.evaluation` builds the roles; the loop takes the
 :class:`~physinfer.roles.Target` this returns). ``refine``, ``diagnose`` and ``infer`` load
 their targets here, and :func:`start_from_video` reads where the target video itself points
 (``refine`` and ``diagnose`` start their searches there).
@@ -21,9 +21,8 @@ import numpy as np
 
 from physinfer.conditioning import Conditioning, condition_target
 from physinfer.errors import UserInputError
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import Pipeline, full_parameter_space
 from physinfer.parameters import parse_float_assignments
-from physinfer.pipeline import full_parameter_space
 from physinfer.roles import Target
 from physinfer.types import Clip
 from physinfer.video import read_video

@@ -21,8 +21,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from physinfer.datasets.executors import limit_threads, open_executor
-from physinfer.evaluation import simulate_one
-from physinfer.pipeline import build_pipeline
+from physinfer.evaluation import build_pipeline, simulate_one
 from physinfer.plugins import load_registry
 from physinfer.types import Clip
 from physinfer.worker_cache import thread_cached

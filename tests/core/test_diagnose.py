@@ -98,7 +98,7 @@ def test_self_consistency_gap_summaries():
 
 def test_calibration_seeds_keep_the_single_runs_seeds_and_differ():
     from physinfer.discrepancy.stages import calibration_seeds
-    from physinfer.noise import noise_seeds
+    from physinfer.evaluation import noise_seeds
 
     for seed in (0, 3, 41):
         pairs = calibration_seeds(seed, 4)
@@ -302,7 +302,7 @@ def test_refine_model_takes_the_scene_the_model_was_fitted_on(tmp_path: Path):
 
 
 def _pendulum_target(tmp_path: Path, effect: str | None) -> Path:
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.video import write_video
 
@@ -541,7 +541,7 @@ def test_a_calibration_target_is_encoded_once_and_read_back(tmp_path: Path, monk
     whose resume was refused. It is encoded once and read back after; another θ re-encodes."""
     import physinfer.video as video
     from physinfer.discrepancy.stages import calibration_target
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.roles import Target
 

@@ -33,10 +33,9 @@ from physinfer.discrepancy.stages import deterministic
 from physinfer.discrepancy.starts import search_starts
 from physinfer.discrepancy.verdict import LEAD_RATIO, closest_lead, closest_unnamed, search_end
 from physinfer.discrepancy.warmstart import WarmStartOptimizer
-from physinfer.evaluation import squared_distance
+from physinfer.evaluation import build_pipeline, squared_distance
 from physinfer.optimizers.random import RandomOptimizer
 from physinfer.parameters import ParameterSpace, ParameterSpec
-from physinfer.pipeline import build_pipeline
 from physinfer.testing import check_phenomenon
 
 #: The issue's target: drag 0.8 1/m hidden behind a restitution of 0.8.
@@ -171,7 +170,7 @@ def test_the_ridge_probe_finds_the_drag_behind_the_restitution(tmp_path: Path, d
     and refits the base to the video: its closest point is near the truth, far closer than θ̂."""
     from physinfer.discrepancy.ridge import ridge_starts
     from physinfer.discrepancy.settings import DiagnoseSettings
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.video import read_video
 
     registry = ball_registry()

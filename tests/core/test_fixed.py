@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
+from physinfer.evaluation import build_pipeline
 from physinfer.fixed import FixedParameters, resolve_fixed
 from physinfer.parameters import ParameterSpace, ParameterSpec
-from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.rundir import RunDirectory
 from physinfer.session import refine

@@ -90,9 +90,9 @@ TABLE: dict[str, dict[str, str]] = {
     },
     "engine": {
         "physinfer.fixed": "the model spec's --fix",
-        "physinfer.evaluation": "",
-        "physinfer.pipeline": "",
-        "physinfer.noise": "",
+        "physinfer.evaluation": "one model's pipeline: built, evaluated, its noise floor",
+        "physinfer.pipeline": "old names of the pipeline's builders (physinfer.moved)",
+        "physinfer.noise": "old names of the noise floor (physinfer.moved)",
         "physinfer.refinement": "the loop's typed records: SearchSpec, RefineResult",
         "physinfer.resimulation": "old names of the loop's re-simulations (physinfer.moved)",
         "physinfer.loop": "",
@@ -125,8 +125,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.render_estimate": "the camera estimate",
         "physinfer.meshio": "another simulator's meshes in",
         "physinfer.target": "the target: a user's video read and conditioned, or the phenomenon's",
-        "physinfer.specs": "what a refinement is asked (model, target, search, execution): the "
-        "target's spec reads the target",
+        "physinfer.specs": "old names of the refine command's request (physinfer.moved)",
         "physinfer.as_given": "",
         "physinfer.adequacy": "a fit judged against what a camera does to a clip (as_given)",
         "physinfer.datasets": "",
@@ -192,7 +191,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.report.refine_page": "",
     },
     "commands": {
-        "physinfer.session": "the refine command",
+        "physinfer.session": "the refine command and what it is asked (the request's specs)",
         "physinfer.discrepancy.workflow": "the diagnose command: runs the stages, writes the "
         "results, asks the report for its page",
         "physinfer.discrepancy.outputs": "the diagnose command's result files",

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import Pipeline, measure_noise_floor, noise_seeds
 from physinfer.loop import run_refinement, select_best
-from physinfer.noise import measure_noise_floor, noise_seeds
 from physinfer.parameters import ParameterSpace, ParameterSpec
 from physinfer.refinement import SearchSpec
 from physinfer.roles import Embedder, Renderer, Simulator, Target

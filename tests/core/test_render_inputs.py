@@ -321,7 +321,7 @@ def test_infer_and_refine_take_a_shipped_estimator_of_longer_clips_for_a_longer_
     same size at any length): only the choice is tested."""
     from dataclasses import replace
 
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.plugins import load_registry
     from physinfer.posterior.infer_workflow import infer, posterior_for_refinement
     from physinfer.video import write_video

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from physinfer.errors import UserInputError
-from physinfer.pipeline import build_pipeline
+from physinfer.evaluation import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.rundir import RunDirectory, embedding_fingerprint, resume_differences
 from physinfer.session import refine

@@ -1,4 +1,4 @@
-"""The refine command's specs (``physinfer.specs``): each setting declared once, as a field
+"""The refine command's specs (``physinfer.session``): each setting declared once, as a field
 of one spec, and carried from the API's options and the command's keywords by its name."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from physinfer.api import RefineOptions
 from physinfer.api import _refine_request as refine_request
 from physinfer.refinement import SearchSpec
-from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
+from physinfer.session import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
 
 SPECS = (ModelSpec, TargetSpec, SearchSpec, ExecutionSpec)
 

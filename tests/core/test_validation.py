@@ -14,9 +14,9 @@ from typer.testing import CliRunner
 
 from physinfer.cli.app import app, parse_render_set
 from physinfer.errors import UserInputError
+from physinfer.evaluation import build_pipeline
 from physinfer.fixed import resolve_fixed
 from physinfer.parameters import parse_assignments
-from physinfer.pipeline import build_pipeline
 from physinfer.plugins import load_registry
 from physinfer.roles import Renderer
 from physinfer.session import refine

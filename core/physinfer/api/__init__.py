@@ -51,15 +51,15 @@ from physinfer.discrepancy.decide import DecisionRule
 from physinfer.discrepancy.settings import DiagnoseSettings, LimitConfig
 from physinfer.discrepancy.workflow import run_diagnosis
 from physinfer.errors import UserInputError
+from physinfer.evaluation import build_pipeline, naming_effects
 from physinfer.io import check_output_file
 from physinfer.outputs import OutputFolder
 from physinfer.parameters import parse_float_assignments
-from physinfer.pipeline import build_pipeline, naming_effects
 from physinfer.progress import StageProgress
 from physinfer.refinement import RefineResult, SearchSpec
 from physinfer.scene import scene_of
+from physinfer.session import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
 from physinfer.session import run as run_refine
-from physinfer.specs import ExecutionSpec, ModelSpec, RefineRequest, TargetSpec
 from physinfer.video import write_video
 
 if TYPE_CHECKING:  # their modules import torch and sbi: imported when the function runs
@@ -210,7 +210,7 @@ def refine(
 
 
 def _refine_request(plugin: str, options: RefineOptions) -> RefineRequest:
-    """The refine command's specs (:mod:`physinfer.specs`) from its options: each field
+    """The refine command's specs (:mod:`physinfer.session`) from its options: each field
     copied from the option of its name, except those named or converted here."""
     o = options
     return RefineRequest(

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import Pipeline, make_simulator
 from physinfer.fixed import FixedParameters
 from physinfer.parameters import ParameterSpace
-from physinfer.pipeline import make_simulator
 from physinfer.roles import Effect
 
 

@@ -29,8 +29,13 @@ from physinfer import video
 from physinfer.discrepancy.candidates import augmented_pipeline
 from physinfer.discrepancy.ladder import Probe, ProbeFactory, stack_rows
 from physinfer.discrepancy.parallel import WorkerPool, worker_pipeline
-from physinfer.evaluation import ClipEmbedder, Pipeline, simulate_and_embed, simulate_many
-from physinfer.pipeline import fixed_by_user
+from physinfer.evaluation import (
+    ClipEmbedder,
+    Pipeline,
+    fixed_by_user,
+    simulate_and_embed,
+    simulate_many,
+)
 from physinfer.threads import refinement_torch_threads, torch_threads
 from physinfer.worker_cache import thread_cached
 

@@ -3,7 +3,7 @@
 A refinement's best distance is the minimum over many noisy evaluations, so it is biased
 low (the winner's curse) and says nothing about how far the model's *other* realisations
 are. :func:`measure_gap` therefore re-simulates the best θ under ``K`` fresh seeds with
-:func:`physinfer.noise.measure_noise_floor`: the median distance from those
+:func:`physinfer.evaluation.measure_noise_floor`: the median distance from those
 re-simulations to the target is the **gap**, the median distance among them the **noise
 floor** (what a perfect model would leave). The same seeds are used for every model of a
 diagnosis, so gaps are compared pairwise. Measurements are cached as JSON in the stage's
@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from physinfer.evaluation import NoiseFloor, measure_noise_floor
 from physinfer.io import atomic_save_npz, atomic_write_json, read_keyed_json
-from physinfer.noise import NoiseFloor, measure_noise_floor
 
 if TYPE_CHECKING:
     from physinfer.evaluation import ClipEmbedder, Pipeline
@@ -71,7 +71,7 @@ def measure_gap(
         embed_clips: Make the re-simulations there (``None``: here); the same numbers.
 
     Returns:
-        The :class:`~physinfer.noise.NoiseFloor`; its ``gap`` and ``floor`` are medians.
+        The :class:`~physinfer.evaluation.NoiseFloor`; its ``gap`` and ``floor`` are medians.
 
     Raises:
         SimulationFailed: when fewer than two re-simulations succeed.

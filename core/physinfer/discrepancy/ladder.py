@@ -22,8 +22,7 @@ import numpy as np
 
 from physinfer import video
 from physinfer.discrepancy.decide import DecisionRule
-from physinfer.evaluation import Pipeline, simulate_many, squared_distance
-from physinfer.noise import noise_seeds
+from physinfer.evaluation import Pipeline, noise_seeds, simulate_many, squared_distance
 from physinfer.parameters import ParameterSpace
 
 

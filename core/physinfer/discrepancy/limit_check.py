@@ -48,9 +48,8 @@ from physinfer.discrepancy.stages import (
     effect_stage,
     run_stage,
 )
+from physinfer.evaluation import fixed_by_user, noise_seeds
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.noise import noise_seeds
-from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.settings import DiagnoseSettings

@@ -17,10 +17,8 @@ from physinfer.discrepancy.gap import measure_gap
 from physinfer.discrepancy.ladder import LimitInputs
 from physinfer.discrepancy.limits import detection_limits
 from physinfer.discrepancy.stages import Stage
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import Pipeline, build_pipeline, fixed_by_user, noise_seeds
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.noise import noise_seeds
-from physinfer.pipeline import build_pipeline, fixed_by_user
 from physinfer.refinement import RefineResult
 from physinfer.registry import Registry
 from physinfer.roles import Target

@@ -15,8 +15,7 @@ from physinfer.discrepancy.localise import localise
 from physinfer.discrepancy.model import ModelFile, write_model
 from physinfer.discrepancy.records import Candidate, Verdict
 from physinfer.discrepancy.stages import Stage, clip_of
-from physinfer.noise import NoiseFloor
-from physinfer.pipeline import fixed_by_user, full_parameter_space
+from physinfer.evaluation import NoiseFloor, fixed_by_user, full_parameter_space
 from physinfer.refinement import RefineResult
 from physinfer.roles import Target
 from physinfer.rundir import optional_settings

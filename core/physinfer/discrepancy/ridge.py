@@ -46,10 +46,9 @@ from physinfer.discrepancy.refit import (
     refit_to_target,
 )
 from physinfer.discrepancy.starts import RIDGE_FILE
+from physinfer.evaluation import fixed_by_user, noise_seeds
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.noise import noise_seeds
 from physinfer.parameters import ParameterSpace
-from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool

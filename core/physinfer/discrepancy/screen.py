@@ -53,8 +53,8 @@ from physinfer.discrepancy.ladder import (
     run_ladder,
 )
 from physinfer.discrepancy.limit_rule import Threshold
+from physinfer.evaluation import fixed_by_user
 from physinfer.io import atomic_write_json, read_keyed_json
-from physinfer.pipeline import fixed_by_user
 
 if TYPE_CHECKING:
     from physinfer.discrepancy.parallel import WorkerPool

@@ -74,7 +74,7 @@ class DiagnoseSettings:
         embedder: Embedder name (``None``: the phenomenon's default).
         embedder_frames: Frames a parameter-free embedder reads (``None``: its default).
         duration_s: Seconds every simulation of every stage records (``None``: the
-            phenomenon's default); see :func:`physinfer.pipeline.build_pipeline`.
+            phenomenon's default); see :func:`physinfer.evaluation.build_pipeline`.
         fixed: ``NAME=VALUE`` items (patterns allowed) held fixed in every model and left
             out of every search: values the user knows (see :mod:`physinfer.fixed`).
         weights: Embedder weights.

@@ -30,11 +30,16 @@ from physinfer.discrepancy.starts import (
     video_start_identity,
 )
 from physinfer.errors import ResumeMismatch, UserInputError
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import (
+    EffectParameterError,
+    NoiseFloor,
+    Pipeline,
+    build_pipeline,
+    fixed_by_user,
+    noise_seeds,
+)
 from physinfer.io import atomic_write_json
 from physinfer.loop import run_refinement
-from physinfer.noise import NoiseFloor, noise_seeds
-from physinfer.pipeline import EffectParameterError, build_pipeline, fixed_by_user
 from physinfer.refinement import RefineResult, SearchSpec
 from physinfer.registry import Registry
 from physinfer.roles import Effect, Target

@@ -71,13 +71,11 @@ from physinfer.discrepancy.stages import (
 )
 from physinfer.discrepancy.verdict import judge_stages, verdict_notes
 from physinfer.errors import UserInputError
-from physinfer.evaluation import Pipeline
+from physinfer.evaluation import NoiseFloor, Pipeline, noise_seeds, target_duration
 from physinfer.io import atomic_write_json
 from physinfer.locking import exclusive_directory
 from physinfer.moved import moved_names
-from physinfer.noise import NoiseFloor, noise_seeds
 from physinfer.outputs import OutputFolder
-from physinfer.pipeline import target_duration
 from physinfer.progress import StageProgress
 from physinfer.refinement import RefineResult
 from physinfer.registry import Registry

@@ -15,9 +15,9 @@ import numpy as np
 from physinfer.adequacy import predictive_check
 from physinfer.conditioning import Conditioning
 from physinfer.errors import UserInputError
+from physinfer.evaluation import build_pipeline
 from physinfer.io import atomic_save_npz, atomic_write_json, check_output_dir
 from physinfer.parameters import ParameterSpace
-from physinfer.pipeline import build_pipeline
 from physinfer.posterior.estimator import PosteriorEstimator
 from physinfer.posterior.figures import corner_figure, corner_plot
 from physinfer.posterior.inputs import MAX_OUTSIDE_SHARE

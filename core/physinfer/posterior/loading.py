@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from physinfer.errors import UserInputError
-from physinfer.pipeline import build_pipeline
+from physinfer.evaluation import build_pipeline
 from physinfer.posterior.estimator import EstimatorConfig, PosteriorEstimator, resolve_device
 from physinfer.registry import Registry
 from physinfer.scene import default_scene, scene_text

@@ -69,7 +69,7 @@ def test_refine_renders_at_the_camera_estimated_from_the_video(wide_video, tmp_p
 
 def test_render_set_overrides_the_estimate(wide_video):
     from physinfer.conditioning import Conditioning, condition_target
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.video import read_video
 
     pipeline = build_pipeline(pi.registry(), "flag")
@@ -85,7 +85,7 @@ def test_render_set_overrides_the_estimate(wide_video):
 
 def test_an_embedder_the_estimator_was_not_fitted_on_leaves_the_default_camera(wide_video):
     from physinfer.conditioning import Conditioning, condition_target
-    from physinfer.pipeline import build_pipeline
+    from physinfer.evaluation import build_pipeline
     from physinfer.video import read_video
 
     pipeline = build_pipeline(pi.registry(), "flag", embedder="spectral")
