@@ -64,13 +64,15 @@ demo: install
 # 2026-11-27, where one file per worker (loadfile) took 15.2 min. On a slower 2-core box,
 # 2026-11-29, the same suite took 15.6-16.8 min between runs; after three trims 1,138 tests
 # in 14.9 min (16.2 with two). Each worker's share starts with its longest modules
-# (tests/conftest.py): 1,147 tests in 14.2 min against 15.3 in collection order, 2026-11-29.
+# (tests/conftest.py): 1,147 tests in 14.2 min against 15.3 in collection order, 2026-11-29;
+# 1,183 in 15.0 min on 2026-11-30, after which one 38-s accuracy test became `slow`.
 # PYTEST_WORKERS=0 runs in-process.
 PYTEST_WORKERS ?= 2
 PYTEST_XDIST = $(if $(filter 0,$(PYTEST_WORKERS)),,-n $(PYTEST_WORKERS) --dist worksteal)
 
+# --durations: the slowest tests in every log (the 15-minute budget is watched from them).
 test: install
-	$(BIN)/python -m pytest -q -p no:cacheprovider $(PYTEST_XDIST)
+	$(BIN)/python -m pytest -q -p no:cacheprovider $(PYTEST_XDIST) --durations=30
 
 test-all: install
 	$(BIN)/python -m pytest -q -p no:cacheprovider $(PYTEST_XDIST) -m ""

@@ -155,7 +155,7 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.posterior.training": "",
     },
     "diagnosis": {
-        "physinfer.discrepancy.calibration_stage": "",
+        "physinfer.discrepancy.calibration_stage": "old names of the self-consistency stage (physinfer.moved)",
         "physinfer.discrepancy.candidates": "",
         "physinfer.discrepancy.clip_jobs": "",
         "physinfer.discrepancy.decide": "",
@@ -168,7 +168,9 @@ TABLE: dict[str, dict[str, str]] = {
         "physinfer.discrepancy.limit_text": "",
         "physinfer.discrepancy.limits": "",
         "physinfer.discrepancy.localise": "",
-        "physinfer.discrepancy.needed_calibration": "",
+        "physinfer.discrepancy.needed_calibration": "old names of the self-consistency runs' choice "
+        "(physinfer.moved)",
+        "physinfer.discrepancy.self_consistency": "",
         "physinfer.discrepancy.parallel": "",
         "physinfer.discrepancy.progress": "",
         "physinfer.discrepancy.records": "",

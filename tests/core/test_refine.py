@@ -49,6 +49,7 @@ def test_select_top_re_simulates_the_best_trials_and_reports_the_chosen_one(tmp_
     assert (out / "selection.json").is_file()
 
 
+@pytest.mark.slow  # 38 s, an accuracy check (benchmarks' job); Ax's path is run by the batch and resume tests
 def test_ax_recovers_the_example_truth(tmp_path):
     """The documented tolerance of the pendulum example (docs/writing-a-plugin.md): length and
     amplitude. Damping is not held to one: at 20 trials it trades off against the amplitude,

@@ -43,7 +43,7 @@ from physinfer.cli.options import (
     WeightsOpt,
 )
 from physinfer.discrepancy.limit_text import screened_line
-from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
+from physinfer.discrepancy.self_consistency import limits_scale_note, null_scale_words
 
 # The options only ``diagnose`` has, declared here so its signature reads as a list of settings.
 _TargetOpt = Annotated[

@@ -2,7 +2,7 @@
 
 After the baseline, a diagnosis refines the control, one augmented model per effect and the
 self-consistency runs it needs (each followed by its control; see
-:mod:`physinfer.discrepancy.needed_calibration`). None needs another's result: all start
+:mod:`physinfer.discrepancy.self_consistency`). None needs another's result: all start
 from the baseline's fit. :func:`prefetch_stages` sends them as jobs to
 :func:`physinfer.datasets.open_executor` — ``workers`` local processes, or the workers of a
 Dask scheduler — where :func:`run_job` runs the same stage functions

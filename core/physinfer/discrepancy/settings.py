@@ -95,7 +95,7 @@ class DiagnoseSettings:
             (the maximum by default) makes their gaps one (see :mod:`physinfer.discrepancy.decide`).
         calibrate_all: Refine every self-consistency run and control. By default only the
             runs that can change a decision are refined
-            (:mod:`physinfer.discrepancy.needed_calibration`): the decisions are the same,
+            (:mod:`physinfer.discrepancy.self_consistency`): the decisions are the same,
             the null scale may then be known only as a range.
         calibration_control: Follow each calibration run with its own control
             (``effect_steps`` trials warm-started from its best θ), so that a self-consistency

@@ -314,7 +314,7 @@ def calibration_run(
 
     ``with_control=False`` refines the run's own stage only (its control, if the settings
     ask for one, is left for a later call: ``gap_control`` is then ``None`` and ``gap`` the
-    run's own, an upper bound; see :mod:`physinfer.discrepancy.needed_calibration`)."""
+    run's own, an upper bound; see :mod:`physinfer.discrepancy.self_consistency`)."""
     target_seed, optimizer_seed = calibration_seeds(settings.seed, settings.calibration_runs)[run]
     name, *control_name = calibration_stage_names(run, settings)
     if not with_control:

@@ -3,7 +3,7 @@ an effect named or none, and the notes that say what is left.
 
 :func:`judge_stages` applies the rules of :mod:`physinfer.discrepancy.decide` to the refined
 stages at one null scale; :mod:`physinfer.discrepancy.workflow` calls it at the scales the
-self-consistency runs leave possible (:mod:`physinfer.discrepancy.needed_calibration`) and at
+self-consistency runs leave possible (:mod:`physinfer.discrepancy.self_consistency`) and at
 the one it reports. :func:`verdict_notes` then adds what a user reads beside the decision:
 
 - *Misspecified and nothing named* (:func:`closest_unnamed`). A diagnosis that finds the

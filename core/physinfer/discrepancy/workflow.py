@@ -19,7 +19,7 @@ Stages, each a resumable refinement in its own run directory under ``--out``::
     diagnosis.json, model.json, maps.png, gaps.png, side_by_side.mp4
 
 The self-consistency runs come last and only as far as a decision depends on them
-(:mod:`physinfer.discrepancy.needed_calibration`; all of them with ``calibrate_all``): the
+(:mod:`physinfer.discrepancy.self_consistency`; all of them with ``calibrate_all``): the
 decisions are monotone in the null scale, and where they are the same over the range of
 scales the unrefined runs allow, those runs are skipped.
 
@@ -44,12 +44,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from physinfer.adequacy import DIAGNOSE_ADVICE, agreement_line, assess_fit, verdict_line
-from physinfer.discrepancy.calibration_stage import (
-    calibrate,
-    first_calibration_jobs,
-    limit_scale,
-    scale_text,
-)
 from physinfer.discrepancy.clip_jobs import pooled_clip_embedder
 from physinfer.discrepancy.decide import remainder_after_naming, self_consistency_gap
 from physinfer.discrepancy.limit_check import check_limits, checked_limit
@@ -60,6 +54,12 @@ from physinfer.discrepancy.progress import StageClock
 from physinfer.discrepancy.records import Candidate, Screened, Verdict
 from physinfer.discrepancy.ridge import ridge_starts
 from physinfer.discrepancy.screen import refined_already, screen_effects
+from physinfer.discrepancy.self_consistency import (
+    first_self_consistency_jobs,
+    limit_scale,
+    run_self_consistency,
+    scale_text,
+)
 from physinfer.discrepancy.stages import (
     GapContext,
     ablated_stage,
@@ -375,7 +375,7 @@ def _side_by_side(
         "baseline_best": baseline.best_params, "target": run.target, "target_embedding": run.target_embedding,
         "seeds": run.seeds, "steps": run.steps, "effect_steps": run.effect_steps, "target_label": run.target_label,
     }  # fmt: skip
-    first = first_calibration_jobs(run.settings, effects, run.pool.size, gap0.floor)
+    first = first_self_consistency_jobs(run.settings, effects, run.pool.size, gap0.floor)
     jobs = stage_jobs(run.settings, effects, **job_args, calibration=first)
     return job_args, run_on_workers(run.pool, jobs, run.bars, run.clock, run.say)
 
@@ -426,7 +426,7 @@ def _decide(
     def judged(scale: float) -> tuple[list[Candidate], Verdict, str | None]:
         return judge_stages(stages, before, tested, scale, settings.rule, run.effect_objs)
 
-    calibration, scale, scale_range = calibrate(
+    calibration, scale, scale_range = run_self_consistency(
         settings, run.base, baseline.best_params, run.target, gap0, judged, job_args, effects, run.common, run.bars,
         run.clock, say, run.pool,
     )  # fmt: skip

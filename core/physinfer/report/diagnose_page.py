@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from physinfer.discrepancy.limit_text import limit_line, screened_line
-from physinfer.discrepancy.needed_calibration import limits_scale_note, null_scale_words
+from physinfer.discrepancy.self_consistency import limits_scale_note, null_scale_words
 from physinfer.report.common import Content, adequacy_section, parameter_table, read_json, units_of
 from physinfer.report.markup import (
     figure,

@@ -1,5 +1,5 @@
 """Only the self-consistency runs that can change a decision are refined
-(physinfer.discrepancy.needed_calibration), and the decisions are those of refining them all."""
+(physinfer.discrepancy.self_consistency), and the decisions are those of refining them all."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from physinfer.discrepancy.decide import null_scale, self_consistency_gap
-from physinfer.discrepancy.needed_calibration import CalibrationRun, next_to_refine, scale_bounds
+from physinfer.discrepancy.self_consistency import SelfConsistencyRun, next_to_refine, scale_bounds
 
 
 def _signature(breakpoints):
@@ -22,9 +22,9 @@ def _signature(breakpoints):
 def _settle(a, b, floor, q95, breakpoints, summary="max", workers=None):
     """Run the procedure against known gaps: ``a[r]`` the run's own, ``b[r]`` its control's;
     with ``workers``, a round's controls as the workflow picks them (no more than ``workers``)."""
-    from physinfer.discrepancy.calibration_stage import one_round_of_controls
+    from physinfer.discrepancy.self_consistency import one_round_of_controls
 
-    runs = [CalibrationRun(r) for r in range(len(a))]
+    runs = [SelfConsistencyRun(r) for r in range(len(a))]
     signature = _signature(breakpoints)
     refined = []
     while True:
@@ -57,9 +57,9 @@ def test_the_decisions_are_those_of_every_run_refined(summary, workers):
 
 
 def test_a_round_refines_no_more_controls_than_workers_the_largest_first_stage_gaps_first():
-    from physinfer.discrepancy.calibration_stage import one_round_of_controls
+    from physinfer.discrepancy.self_consistency import one_round_of_controls
 
-    runs = [CalibrationRun(r, gap_run=g) for r, g in enumerate([5.0, 0.5, 3.3, 9.0])]
+    runs = [SelfConsistencyRun(r, gap_run=g) for r, g in enumerate([5.0, 0.5, 3.3, 9.0])]
     assert one_round_of_controls([0, 1, 2, 3], runs, 2) == [0, 3]
     assert one_round_of_controls([0, 1, 2], runs, 2) == [0, 2]
     assert one_round_of_controls([1, 2], runs, 4) == [1, 2]
@@ -70,17 +70,17 @@ def test_a_round_refines_no_more_controls_than_workers_the_largest_first_stage_g
 def test_a_deterministic_phenomenon_sends_every_first_stage_with_the_control_and_effects():
     """A noise floor of 0 leaves the null scale anywhere from 0 up: every run's first stage is
     needed, and goes with the first round; otherwise only where a worker would idle."""
-    from physinfer.discrepancy.calibration_stage import first_calibration_jobs
+    from physinfer.discrepancy.self_consistency import first_self_consistency_jobs
     from physinfer.discrepancy.settings import DiagnoseSettings
 
     settings = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibration_runs=3)
-    assert first_calibration_jobs(settings, ["drag"], 2, floor=0.0) == [(0, False), (1, False), (2, False)]
-    assert first_calibration_jobs(settings, ["drag"], 2, floor=0.3) == []  # control + drag fill the round
-    assert first_calibration_jobs(settings, ["drag", "yaw"], 2, floor=0.3) == [(0, False)]
+    assert first_self_consistency_jobs(settings, ["drag"], 2, floor=0.0) == [(0, False), (1, False), (2, False)]
+    assert first_self_consistency_jobs(settings, ["drag"], 2, floor=0.3) == []  # control + drag fill the round
+    assert first_self_consistency_jobs(settings, ["drag", "yaw"], 2, floor=0.3) == [(0, False)]
     every = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibration_runs=2, calibrate_all=True)
-    assert first_calibration_jobs(every, ["drag"], 2, floor=0.0) == [(0, True), (1, True)]
+    assert first_self_consistency_jobs(every, ["drag"], 2, floor=0.0) == [(0, True), (1, True)]
     none = DiagnoseSettings(plugin="pendulum_lab", out=Path("unused"), calibrate=False)
-    assert first_calibration_jobs(none, ["drag"], 2, floor=0.0) == []
+    assert first_self_consistency_jobs(none, ["drag"], 2, floor=0.0) == []
 
 
 def test_nothing_is_refined_when_no_scale_above_the_floor_changes_a_decision():
@@ -107,7 +107,7 @@ def test_every_run_is_refined_when_the_decision_sits_between_their_gaps():
 
 
 def test_idle_workers_take_controls_only_where_first_stages_need_two_rounds_anyway():
-    from physinfer.discrepancy.calibration_stage import with_idle_controls
+    from physinfer.discrepancy.self_consistency import with_idle_controls
 
     # Three first stages on two workers take two rounds: one run's control fits in the idle slot.
     assert with_idle_controls([0, 1, 2], False, 2) == [(0, True), (1, False), (2, False)]
@@ -120,7 +120,7 @@ def test_idle_workers_take_controls_only_where_first_stages_need_two_rounds_anyw
 
 
 def test_limits_at_the_upper_end_of_a_range_say_so_in_the_verdict_and_on_the_page():
-    from physinfer.discrepancy.needed_calibration import limits_scale_note
+    from physinfer.discrepancy.self_consistency import limits_scale_note
     from physinfer.report.diagnose_page import detection_limits
 
     candidate = {"effect": "quadratic_drag", "detectable_from": {"drag_quadratic": 0.5},
@@ -217,7 +217,7 @@ def test_on_workers_a_deterministic_diagnosis_refines_its_first_stages_beside_th
 
 
 def test_a_null_scale_set_by_the_baseline_fits_floor_says_so():
-    from physinfer.discrepancy.needed_calibration import null_scale_words
+    from physinfer.discrepancy.self_consistency import null_scale_words
 
     # Hidden-yaw seed 4: the baseline stalled where the flag is chaotic (floor 139); the tested
     # fit (the control) has a floor of 64. Without the note "noise floor 64.4, null scale 139"
