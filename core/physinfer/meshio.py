@@ -94,6 +94,7 @@ def read_trajectory_npz(path: str | Path) -> Trajectory:
     """
     path = Path(path)
     check_npz_size(path)
+    _refuse_other_formats(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             names = list(data.files)
@@ -121,6 +122,26 @@ def read_trajectory_npz(path: str | Path) -> Trajectory:
             "(expected vertices (T, V, 3), faces (F, 3), fps)"
         )
     return Trajectory.load(path)
+
+
+#: How an NPZ (a zip archive) and a lone ``.npy`` array begin.
+_NUMPY_MAGIC = (b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")
+
+
+def _refuse_other_formats(path: Path) -> None:
+    """Refuse a file that is neither an NPZ nor an ``.npy`` before numpy reads it: numpy takes
+    any other file for a pickle, and its refusal would name pickles (a video given as the
+    trajectory was told it "holds object arrays")."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(6)
+    except OSError as exc:
+        raise UserInputError(f"cannot read trajectory {path}: {exc}") from None
+    if not head.startswith(_NUMPY_MAGIC):
+        raise UserInputError(
+            f"{path} is not an NPZ file: a trajectory is the NPZ `simulate --trajectory-out` (or "
+            "Trajectory.save) writes, or a folder of per-frame OBJ meshes with --fps"
+        )
 
 
 def check_npz_size(path: Path) -> None:

@@ -206,11 +206,20 @@ BAD = {
         "f_1.obj: a vertex coordinate is NaN or infinite",
     ),
     "object arrays": (lambda d: _object_npz(d.with_suffix(".npz")), "holds object arrays"),
+    "a video given as the trajectory": (
+        lambda d: _write(d.with_suffix(".mp4"), b"\x00\x00\x00\x18ftypmp42"),
+        "is not an NPZ file: a trajectory is the NPZ",
+    ),
     "non-finite npz vertex": (
         lambda d: _nan_npz(d.with_suffix(".npz")),
         "frame 2 has a NaN or infinite vertex",
     ),
 }
+
+
+def _write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
