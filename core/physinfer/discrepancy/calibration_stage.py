@@ -1,6 +1,7 @@
-"""Where diagnose's self-consistency stage was: :mod:`physinfer.discrepancy.self_consistency` (2026-11-30: one module
-for diagnose's self-consistency runs, whose name is not the posterior's "calibration"). Its old
-names are found here with a warning (:data:`physinfer.moved.MOVED`).
+"""Where diagnose's self-consistency stage was: it lives in
+:mod:`physinfer.discrepancy.self_consistency` (2026-11-30: one module for diagnose's
+self-consistency runs, whose name is not the posterior's "calibration"). Its old names are
+found here with a warning (:data:`physinfer.moved.MOVED`).
 """
 
 from __future__ import annotations
