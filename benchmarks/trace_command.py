@@ -82,7 +82,7 @@ def trace(command: list[str], until: str | None = None) -> dict[str, Any]:
     """
     import typer
 
-    from physinfer.cli.app import app
+    from physinfer.cli.app import mounted_app
 
     until = until or ("simulate" if command[:1] == ["refine"] else None)
     order: list[str] = []
@@ -104,7 +104,7 @@ def trace(command: list[str], until: str | None = None) -> dict[str, Any]:
         calls[module] += 1
         functions.setdefault(module, set()).add(frame.f_code.co_name)
 
-    cli = typer.main.get_command(app)
+    cli = typer.main.get_command(mounted_app())  # plugin-registered commands (diagnose, infer) too
     reached = False
     sys.setprofile(hook)
     try:
