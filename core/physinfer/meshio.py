@@ -154,7 +154,7 @@ def check_npz_size(path: Path) -> None:
     try:
         archive = zipfile.ZipFile(path)
     except (OSError, zipfile.BadZipFile):
-        return  # not an archive: np.load says what it is
+        return  # not an archive: read_trajectory refuses it by its first bytes (or np.load reads a .npy)
     declared: list[tuple[int, str, tuple[int, ...], str]] = []
     with archive:
         for info in archive.infolist():
